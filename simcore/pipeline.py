@@ -1,0 +1,480 @@
+"""The staged, cached imaging chain: ``Pipeline().run(scene)`` reads top to bottom through
+the stages.
+
+Each stage declares the scene fields it depends on; its cache key is those fields plus its upstream
+key, so a TNR change re-runs only detection and the cloud, a pulse-energy change only the receiver
+onwards (echoes are computed per joule), and a pose change everything but the target and the rays.
+Cached arrays are read-only. One Pipeline per thread: it is not shared between threads.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy import constants as sc
+
+from . import detection, echo, geometry, materials, receiver, timing
+from .pointcloud import PointCloud, assemble_cloud
+from .scene import Scene, SceneError, with_overrides
+from .target import TargetModel, load_target, with_materials
+
+C = sc.c
+STAGES = ("target", "rays", "hits", "echo", "receiver", "detection", "cloud")
+
+
+# ----------------------------------------------------------------------------------------------
+# stage outputs
+# ----------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class TargetStage:
+    model: TargetModel
+    caster: geometry.RayCaster
+
+
+@dataclass(frozen=True)
+class EchoStage:
+    """Echoes of the pixels that receive light, per joule of pulse energy.
+
+    pixel : (n,) flat pixel index; arrivals_s, weights : (n, K) Eq. 29-30 delays and weights;
+    features : echo.EchoFeatures; material_id, facet_id : (n,) of the strongest sub-ray
+    (material ids index materials.MATERIAL_NAMES).
+    """
+
+    model: TargetModel
+    shape: echo.PulseShape
+    dt_s: float
+    cfd_delay_s: float
+    pixel: np.ndarray
+    arrivals_s: np.ndarray
+    weights: np.ndarray
+    features: echo.EchoFeatures
+    material_id: np.ndarray
+    facet_id: np.ndarray
+
+
+@dataclass(frozen=True)
+class ReceiverStage:
+    model: receiver.ReceiverModel
+    i_pk_a: np.ndarray  # (n,) peak signal current
+    peak_power_w: np.ndarray  # (n,) band-limited peak received power
+    snr: np.ndarray  # (n,) SNR_na (Eq. 18)
+    sigma_pk_a: np.ndarray  # (n,) noise at the peak (Eq. 27)
+
+
+@dataclass(frozen=True)
+class DetectionStage:
+    p_detect: np.ndarray  # (n,) Eq. 27
+    detected: np.ndarray  # (n,) bool, drawn, in-gate
+    range_true_m: np.ndarray  # (n,) noise-free half-max range (Eq. 31, carries the waveform bias)
+    range_sigma_m: np.ndarray  # (n,) Eq. 24
+    range_m: np.ndarray  # (n,) measured range (true + noise), NaN where not detected
+    threshold_a: float
+    n_false_per_pixel: float
+    outliers: detection.Outliers
+
+
+@dataclass(frozen=True)
+class Waveform:
+    """One pixel's echo. Times since emission [s], powers at the receiver input [W]."""
+
+    row: int
+    col: int
+    t_s: np.ndarray
+    power_w: np.ndarray  # unfiltered P_r(t)
+    filtered_w: np.ndarray  # band-limited y(t)
+    emitted_t_s: np.ndarray  # the emitted pulse, band-limited, scaled to this echo's peak
+    emitted_w: np.ndarray
+    t_half_s: float  # half-maximum time of y (NaN if no echo)
+    threshold_w: float  # arming threshold TNR sigma_n expressed as input power
+    range_m: float  # measured range, NaN if not detected
+    range_true_m: float
+    p_detect: float
+    detected: bool
+
+
+@dataclass
+class Result:
+    """One flash: the point cloud, per-pixel products and the stage timings."""
+
+    scene: Scene
+    cloud: PointCloud
+    echo: EchoStage
+    receiver: ReceiverStage
+    detection: DetectionStage
+    hits: geometry.Hits
+    rays: geometry.RayGrid
+    timings_s: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def points(self) -> np.ndarray:
+        return self.cloud.points
+
+    @property
+    def attributes(self) -> dict[str, np.ndarray]:
+        return self.cloud.attributes
+
+    @property
+    def target(self) -> TargetModel:
+        return self.echo.model
+
+    @property
+    def pixels(self) -> int:
+        return self.rays.pixels
+
+    def _image(self, values, fill) -> np.ndarray:
+        img = np.full(self.pixels**2, fill, dtype=np.float64)
+        img[self.echo.pixel] = values
+        return img.reshape(self.pixels, self.pixels)
+
+    @property
+    def range_image_m(self) -> np.ndarray:
+        """(pixels, pixels) measured range of each pixel's target point, NaN where none."""
+        return self._image(self.detection.range_m, np.nan)
+
+    @property
+    def peak_power_image_w(self) -> np.ndarray:
+        """(pixels, pixels) band-limited peak received power, 0 where no echo."""
+        return self._image(self.receiver.peak_power_w, 0.0)
+
+    @property
+    def visible_faces(self) -> np.ndarray:
+        return self.hits.visible_faces
+
+    def waveform(self, row: int, col: int) -> Waveform:
+        """The echo of pixel (row, col): raw and band-limited power, timing marks, threshold."""
+        n = self.pixels
+        if not (0 <= row < n and 0 <= col < n):
+            raise IndexError(f"pixel ({row}, {col}) is outside the {n} x {n} array")
+        e, d, r = self.echo, self.detection, self.receiver
+        energy = self.scene.laser.pulse_energy_j
+        threshold_w = d.threshold_a / r.model.responsivity_a_w
+        i = np.searchsorted(e.pixel, row * n + col)
+        if i >= len(e.pixel) or e.pixel[i] != row * n + col:
+            empty = np.zeros(0)
+            return Waveform(
+                row,
+                col,
+                empty,
+                empty,
+                empty,
+                empty,
+                empty,
+                np.nan,
+                threshold_w,
+                np.nan,
+                np.nan,
+                0.0,
+                False,
+            )
+        t, raw, filt = echo.echo_waveform(e.shape, e.arrivals_s[i], e.weights[i], e.dt_s)
+        peak = r.peak_power_w[i]
+        t_ref = e.shape.t0_s + e.shape.step_s * np.arange(len(e.shape.filtered))
+        keep = (t_ref >= e.shape.t_start_s) & (t_ref <= e.shape.t_end_s)
+        return Waveform(
+            row,
+            col,
+            t,
+            raw * energy,
+            filt * energy,
+            t_ref[keep],
+            e.shape.filtered[keep] * (peak / e.shape.peak_w_per_j),
+            float(e.features.t_half_s[i]),
+            threshold_w,
+            float(d.range_m[i]),
+            float(d.range_true_m[i]),
+            float(d.p_detect[i]),
+            bool(d.detected[i]),
+        )
+
+    def summary(self) -> dict[str, Any]:
+        """The JSON summary of DESIGN.md section 3."""
+        d, r = self.detection, self.receiver
+        attrs = self.attributes
+        n_out = int(attrs["is_outlier"].sum())
+        n_hit = int(self.hits.hit_pixel_mask.sum())
+        n_target_points = len(self.cloud) - n_out
+        finite_sigma = d.range_sigma_m[d.detected]
+        return {
+            "n_pixels": self.pixels**2,
+            "n_hit_pixels": n_hit,
+            "n_lit_pixels": len(self.echo.pixel),
+            "n_points": len(self.cloud),
+            "n_target_points": n_target_points,
+            "n_outliers": n_out,
+            "n_dropped": n_hit - n_target_points,
+            "p_detect_mean": _stat(d.p_detect, np.mean),
+            "snr_median": _stat(r.snr, np.median),
+            "range_sigma_m_median": _stat(finite_sigma, np.median),
+            "n_false_expected": d.n_false_per_pixel * self.pixels**2,
+            "timings_s": dict(self.timings_s),
+            "target": {"name": self.target.name, "credit": self.target.credit},
+            "scene": self.scene.to_dict(),
+        }
+
+
+def _stat(values, fn) -> float | None:
+    v = np.asarray(values)
+    v = v[np.isfinite(v)]
+    return float(fn(v)) if len(v) else None
+
+
+def _readonly(*arrays):
+    for a in arrays:
+        if isinstance(a, np.ndarray):
+            a.setflags(write=False)
+
+
+# ----------------------------------------------------------------------------------------------
+# the stages
+# ----------------------------------------------------------------------------------------------
+def stage_target(scene: Scene) -> TargetStage:
+    model = load_target(scene.target)
+    return TargetStage(model, geometry.RayCaster(model))
+
+
+def stage_rays(scene: Scene) -> geometry.RayGrid:
+    return geometry.ray_grid(scene.detector.pixels, scene.receive.fov_rad, scene.fidelity.subrays)
+
+
+def stage_hits(scene: Scene, tgt: TargetStage, rays: geometry.RayGrid) -> geometry.Hits:
+    pose = geometry.target_pose(scene.pose, tgt.model.mesh.extents)
+    hits = geometry.cast(tgt.caster, rays, pose)
+    _readonly(hits.range_m, hits.cos_theta, hits.face, hits.depth_m)
+    return hits
+
+
+def stage_echo(scene: Scene, tgt: TargetStage, rays: geometry.RayGrid, hits: geometry.Hits):
+    model = with_materials(tgt.model, scene.target.materials)
+    a = echo.A_PAPER if scene.uses("pulse_constant") else echo.A_FWHM
+    shape = echo.pulse_shape(scene.laser.pulse_width_s, a, scene.detector.bandwidth_hz)
+    dt = scene.fidelity.time_step_s or echo.default_time_step_s(
+        scene.laser.pulse_width_s, scene.detector.bandwidth_hz
+    )
+    t_d = timing.cfd_delay_s(shape, scene.timing.cfd_delay_s)
+
+    lit_gain = echo.illumination_gain(
+        rays.directions, scene.illumination_angle_rad, scene.transmit.illumination
+    )
+    candidates = np.flatnonzero(hits.hit_pixel_mask & (lit_gain > 0).any(axis=1))
+    face = hits.face[candidates]
+    hit = face >= 0
+    params = materials.parameter_table(materials.MATERIAL_NAMES)
+    mat = np.where(hit, model.face_material_library[np.where(hit, face, 0)], -1)
+    A, B, m, s = (params[np.maximum(mat, 0), j] for j in range(4))
+    rho = np.where(hit, materials.brdf(hits.cos_theta[candidates], A, B, m, s), 0.0)
+    weights = echo.element_weights(
+        hits.range_m[candidates],
+        hits.cos_theta[candidates],
+        rho,
+        lit_gain[candidates],
+        aperture_area_m2=np.pi * scene.receive.aperture_diameter_m**2 / 4.0,
+        eta_t=scene.transmit.transmittance,
+        eta_r=scene.receive.transmittance,
+        ifov_rad=scene.ifov_rad,
+        subrays=rays.subrays,
+        paper_4pi=scene.uses("eq30_4pi"),
+    )
+    keep = (weights > 0).any(axis=1)
+    pixel, weights, face, mat = candidates[keep], weights[keep], face[keep], mat[keep]
+    rng_m = hits.range_m[pixel]
+    if scene.uses("eq29_one_way"):  # relief along the boresight, one way (the paper's print)
+        distance = scene.pose.distance_m
+        arrivals = 2.0 * distance / C + (hits.depth_m[pixel] - distance) / C
+    else:
+        arrivals = 2.0 * rng_m / C
+    arrivals = np.where(weights > 0, arrivals, 0.0)
+    feats = echo.echo_features(
+        shape,
+        arrivals,
+        weights,
+        dt,
+        t_d,
+        scene.timing.cfd_fraction,
+        raw_peak=scene.uses("unfiltered_peak"),
+    )
+    strongest = np.argmax(weights, axis=1)
+    rows = np.arange(len(pixel))
+    _readonly(pixel, arrivals, weights)
+    return EchoStage(
+        model,
+        shape,
+        dt,
+        t_d,
+        pixel,
+        arrivals,
+        weights,
+        feats,
+        mat[rows, strongest].astype(np.int32),
+        face[rows, strongest].astype(np.int32),
+    )
+
+
+def stage_receiver(scene: Scene, ech: EchoStage) -> ReceiverStage:
+    rx = receiver.receiver_model(
+        scene.detector, scene.amplifiers, scene.laser.wavelength_m, paper_qe=scene.uses("qe_paper")
+    )
+    energy = scene.laser.pulse_energy_j
+    peak_w = ech.features.peak_w_per_j * energy
+    snr_peak_w = ech.features.peak_raw_w_per_j * energy if scene.uses("unfiltered_peak") else peak_w
+    i_pk = rx.responsivity_a_w * snr_peak_w
+    return ReceiverStage(rx, i_pk, peak_w, rx.snr(i_pk), rx.sigma_peak_a(i_pk))
+
+
+def stage_detection(scene: Scene, ech: EchoStage, rx: ReceiverStage) -> DetectionStage:
+    t = scene.timing
+    rng = np.random.default_rng([scene.seed, 2024])
+    sigma_n = rx.model.sigma_n_a
+    threshold = t.tnr * sigma_n
+    if scene.uses("eq27_paper"):
+        p_d = detection.detection_probability_paper(rx.snr, t.tnr)
+    else:
+        p_d = detection.detection_probability(rx.i_pk_a, threshold, rx.sigma_pk_a)
+    if scene.uses("eq25_risetime"):
+        s_cfd = timing.sigma_cfd_paper_m(
+            rx.snr, t.cfd_fraction, timing.rise_time_10_90_s(ech.shape)
+        )
+    else:
+        s_cfd = timing.sigma_cfd_m(
+            rx.snr,
+            ech.features.cfd_slope_per_s,
+            t.cfd_fraction,
+            ech.cfd_delay_s,
+            ech.shape.sigma_h_s,
+        )
+    sigma = timing.range_sigma_m(s_cfd, timing.sigma_quantisation_m(t.resolution_s))
+    r_true = timing.range_from_half_max_m(ech.features.t_half_s, ech.shape.t_half_s)
+
+    n = len(ech.pixel)
+    drawn = rng.random(n) < p_d
+    noise = rng.standard_normal(n)
+    with np.errstate(invalid="ignore"):
+        r_meas = r_true + np.where(drawn, sigma * noise, 0.0)
+    lo = max(0.0, scene.gate_center_m - t.range_gate_m / 2.0)
+    hi = scene.gate_center_m + t.range_gate_m / 2.0
+    detected = drawn & np.isfinite(r_meas) & (r_meas >= lo) & (r_meas <= hi)
+    r_meas = np.where(detected, r_meas, np.nan)
+
+    if scene.uses("eq28_paper"):
+        n_false = detection.false_alarms_per_pixel_paper(
+            t.tnr, t.range_gate_m, scene.detector.bandwidth_hz
+        )
+    else:
+        n_false = detection.false_alarms_per_pixel(
+            t.tnr, t.range_gate_m, scene.detector.bandwidth_hz
+        )
+    outliers = detection.draw_outliers(
+        rng, scene.detector.pixels**2, n_false, scene.gate_center_m, t.range_gate_m
+    )
+    _readonly(p_d, detected, r_true, sigma, r_meas)
+    return DetectionStage(p_d, detected, r_true, sigma, r_meas, threshold, n_false, outliers)
+
+
+def stage_cloud(rays: geometry.RayGrid, ech: EchoStage, rx: ReceiverStage, det: DetectionStage):
+    k = det.detected
+    return assemble_cloud(
+        rays.pixel_directions,
+        rays.pixels,
+        ech.pixel[k],
+        det.range_m[k],
+        rx.peak_power_w[k],
+        rx.snr[k],
+        ech.material_id[k],
+        ech.facet_id[k],
+        det.outliers.pixel,
+        det.outliers.range_m,
+    )
+
+
+# ----------------------------------------------------------------------------------------------
+# the orchestrator
+# ----------------------------------------------------------------------------------------------
+def _deps(scene: Scene) -> dict[str, tuple]:
+    """The scene fields each stage reads (its cache key, before the upstream keys)."""
+    forms = lambda *names: tuple(scene.uses(n) for n in names)  # noqa: E731
+    lz, det = scene.laser, scene.detector
+    return {
+        "target": (scene.target.mesh, scene.target.scale_m_per_unit, scene.target.material_map),
+        "rays": (det.pixels, scene.receive.fov_rad, scene.fidelity.subrays),
+        "hits": (scene.pose,),
+        "echo": (
+            lz.pulse_width_s,
+            lz.divergence_rad,
+            scene.transmit,
+            scene.receive,
+            scene.target.materials,
+            det.bandwidth_hz,
+            scene.fidelity,
+            scene.timing.cfd_fraction,
+            scene.timing.cfd_delay_s,
+            forms("pulse_constant", "eq30_4pi", "eq29_one_way", "unfiltered_peak"),
+        ),
+        "receiver": (
+            lz.pulse_energy_j,
+            lz.wavelength_m,
+            det,
+            scene.amplifiers,
+            forms("qe_paper", "unfiltered_peak"),
+        ),
+        "detection": (
+            scene.timing,
+            scene.seed,
+            scene.gate_center_m,
+            forms("eq25_risetime", "eq27_paper", "eq28_paper"),
+        ),
+        "cloud": (),
+    }
+
+
+class Pipeline:
+    """Runs scenes through the stages, re-running only those whose inputs changed."""
+
+    def __init__(self):
+        self._cache: dict[str, tuple[tuple, Any]] = {}
+
+    def clear(self) -> None:
+        self._cache.clear()
+
+    def run(self, scene: Scene) -> Result:
+        deps = _deps(scene)
+        timings: dict[str, float] = {}
+        keys: dict[str, tuple] = {}
+
+        def stage(name: str, upstream: tuple[str, ...], compute):
+            key = (deps[name], *(keys[u] for u in upstream))
+            keys[name] = key
+            cached = self._cache.get(name)
+            if cached is not None and cached[0] == key:
+                timings[name] = 0.0
+                return cached[1]
+            t0 = time.perf_counter()
+            value = compute()
+            timings[name] = time.perf_counter() - t0
+            self._cache[name] = (key, value)
+            return value
+
+        tgt = stage("target", (), lambda: stage_target(scene))
+        rays = stage("rays", (), lambda: stage_rays(scene))
+        hits = stage("hits", ("target", "rays"), lambda: stage_hits(scene, tgt, rays))
+        ech = stage("echo", ("hits",), lambda: stage_echo(scene, tgt, rays, hits))
+        rx = stage("receiver", ("echo",), lambda: stage_receiver(scene, ech))
+        det = stage("detection", ("receiver",), lambda: stage_detection(scene, ech, rx))
+        cloud = stage("cloud", ("detection",), lambda: stage_cloud(rays, ech, rx, det))
+        return Result(scene, cloud, ech, rx, det, hits, rays, timings)
+
+
+def simulate(scene: Scene | None = None, pipeline: Pipeline | None = None, **quick) -> Result:
+    """Simulate one flash. ``quick`` takes the flat names (pitch_deg, azimuth_deg, distance_m,
+    pixels, pulse_energy_j, tnr, seed) or dotted keys via ``overrides={...}``.
+
+    >>> r = simulate(pixels=32)               # the paper scene, 32 x 32 pixels
+    >>> r.summary()["n_pixels"]
+    1024
+    """
+    overrides = quick.pop("overrides", None)
+    scene = with_overrides(scene or Scene(), overrides, **quick)
+    if not isinstance(scene, Scene):
+        raise SceneError("simulate() expects a Scene")
+    return (pipeline or Pipeline()).run(scene)

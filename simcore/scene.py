@@ -1,0 +1,548 @@
+"""Scene description: frozen dataclasses, validation, TOML load and dump.
+
+Every key carries its unit in its name (``distance_m``, ``pulse_energy_j``). Each field declares
+its valid range and a one-line doc in its metadata, so validation, error messages and the README's
+key reference all come from this one place (``lmapd keys`` prints the table).
+
+The defaults are the paper's Table 4 ("paper" scene) plus documented choices for what the paper
+leaves out (PHYSICS.md section 3).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import tomli_w
+
+ASSETS_DIR = Path(__file__).resolve().parent.parent / "assets"
+SCENES_DIR = ASSETS_DIR / "scenes"
+
+
+class SceneError(ValueError):
+    """A scene key, value or file is invalid. The message names the key and its valid range."""
+
+
+def _f(default, unit: str, lo=None, hi=None, doc: str = "", choices=None, lo_open=False):
+    """A dataclass field with unit, valid range [lo, hi] (or (lo, hi] if lo_open) and a doc line."""
+    meta = {"unit": unit, "lo": lo, "hi": hi, "doc": doc, "choices": choices, "lo_open": lo_open}
+    if isinstance(default, (list, dict)):
+        raise TypeError("mutable default")
+    return field(default=default, metadata=meta)
+
+
+@dataclass(frozen=True)
+class Laser:
+    wavelength_m: float = _f(1064e-9, "m", 200e-9, 20e-6, "laser wavelength (not in the paper)")
+    pulse_energy_j: float = _f(5e-3, "J", 0.0, 100.0, "energy per pulse (Table 4)", lo_open=True)
+    pulse_width_s: float = _f(
+        5e-9, "s", 10e-12, 1e-6, "pulse width tau of Eq. 1 (the FWHM in our convention)"
+    )
+    divergence_rad: float = _f(
+        2e-3, "rad", 0.0, 1.0, "laser full divergence before the expander", lo_open=True
+    )
+
+
+@dataclass(frozen=True)
+class TransmitOptics:
+    beam_expansion_ratio: float = _f(
+        1 / 15, "1", 0.0, 1000.0, "divergence ratio out/in (1/15 widens 2 -> 30 mrad)", lo_open=True
+    )
+    transmittance: float = _f(
+        0.95, "1", 0.0, 1.0, "transmit optics transmittance eta_t", lo_open=True
+    )
+    illumination: str = _f(
+        "flat_top",
+        "-",
+        doc="illuminated spot: flat_top disc (Eq. 5), square, gaussian (Eq. 4)",
+        choices=("flat_top", "square", "gaussian"),
+    )
+
+
+@dataclass(frozen=True)
+class ReceiveOptics:
+    aperture_diameter_m: float = _f(0.5, "m", 0.0, 20.0, "receiver aperture diameter", lo_open=True)
+    transmittance: float = _f(
+        0.95, "1", 0.0, 1.0, "receive optics transmittance eta_r (not given)", lo_open=True
+    )
+    fov_rad: float = _f(
+        0.03, "rad", 0.0, 1.0, "full field of view of the array (Eq. 22)", lo_open=True
+    )
+
+
+@dataclass(frozen=True)
+class Detector:
+    pixels: int = _f(256, "px", 1, 1024, "pixels per side of the square LM-APD array")
+    pixel_pitch_m: float = _f(
+        150e-6, "m", 0.0, 1e-2, "pixel pitch (sets f_r = pixels*pitch/fov)", lo_open=True
+    )
+    gain_from: str = _f(
+        "responsivity",
+        "-",
+        doc="how the APD gain M is given: responsivity, gain, or bias (Eq. 9)",
+        choices=("responsivity", "gain", "bias"),
+    )
+    responsivity_a_w: float = _f(
+        25.0, "A/W", 0.0, 1e4, "responsivity with gain (Eq. 8, Table 4)", lo_open=True
+    )
+    gain: float = _f(100.0, "1", 1.0, 1e4, "APD gain M when gain_from = gain")
+    bias_voltage_v: float = _f(380.0, "V", 0.0, 1e4, "bias voltage when gain_from = bias")
+    breakdown_voltage_v: float = _f(
+        400.0, "V", 0.0, 1e4, "breakdown voltage V_B (Eq. 9)", lo_open=True
+    )
+    miller_exponent: float = _f(2.0, "1", 1.0, 10.0, "Miller exponent n (Eq. 9; Si 1.8-4)")
+    quantum_efficiency: float = _f(
+        0.4, "1", 0.0, 1.0, "quantum efficiency eta_q at the wavelength", lo_open=True
+    )
+    excess_noise_k: float = _f(0.02, "1", 0.0, 1.0, "ionisation ratio k of Eq. 11 (Si 0.02)")
+    bandwidth_hz: float = _f(120e6, "Hz", 1e3, 1e11, "noise-equivalent bandwidth B")
+    temperature_k: float = _f(298.15, "K", 0.0, 1000.0, "detector temperature", lo_open=True)
+    load_ohm: float = _f(50.0, "ohm", 0.0, 1e9, "load resistance R_L (Eq. 13)", lo_open=True)
+    dark_surface_a: float = _f(1e-9, "A", 0.0, 1e-3, "surface dark current I_ds (not multiplied)")
+    dark_bulk_a: float = _f(1e-11, "A", 0.0, 1e-3, "bulk dark current I_db (primary)")
+    snr_max: float = _f(
+        math.inf, "1", 0.0, math.inf, "saturation: SNR ceiling (inf = none)", lo_open=True
+    )
+
+
+@dataclass(frozen=True)
+class Amplifiers:
+    noise_factors: tuple[float, ...] = _f(
+        (1.05, 1.15, 1.15), "1", 1.0, 100.0, "noise factor of each stage (TIA, AGC, AGC; Table 4)"
+    )
+    power_gains: tuple[float, ...] = _f(
+        (100.0, 100.0, 100.0),
+        "1",
+        0.0,
+        1e9,
+        "linear available power gain of each stage",
+        lo_open=True,
+    )
+
+
+@dataclass(frozen=True)
+class Timing:
+    tnr: float = _f(5.0, "1", 0.0, 50.0, "threshold-to-noise ratio: V_T = tnr * sigma_n")
+    resolution_s: float = _f(100e-12, "s", 0.0, 1e-6, "timing circuit resolution T_t (Eq. 26)")
+    cfd_fraction: float = _f(0.5, "1", 0.0, 1.0, "CFD attenuation k_att (Eq. 19)", lo_open=True)
+    cfd_delay_s: float = _f(
+        0.0, "s", 0.0, 1e-6, "CFD delay t_d; 0 = auto (peak minus half-max time of the pulse)"
+    )
+    range_gate_m: float = _f(1000.0, "m", 0.0, 1e6, "range gate length R_gate", lo_open=True)
+    gate_center_m: float = _f(0.0, "m", 0.0, 1e6, "range gate centre R_st; 0 = the target distance")
+
+
+@dataclass(frozen=True)
+class Target:
+    mesh: str = _f("mro", "-", doc="built-in target name or a path to a glTF/OBJ/STL/PLY mesh")
+    scale_m_per_unit: float = _f(
+        0.0, "m", 0.0, 1e6, "metres per mesh unit; 0 = the target's own default (MRO: 15/89.74)"
+    )
+    material_map: str = _f("", "-", doc="material map TOML; empty = the target's own")
+    materials: tuple[tuple[str, str], ...] = _f(
+        (), "-", doc="per-part material overrides: [target.materials] part = material"
+    )
+
+
+@dataclass(frozen=True)
+class Pose:
+    pitch_deg: float = _f(0.0, "deg", -180.0, 180.0, "rotation about the array's horizontal axis")
+    azimuth_deg: float = _f(0.0, "deg", -360.0, 360.0, "rotation about the array's vertical axis")
+    roll_deg: float = _f(0.0, "deg", -360.0, 360.0, "rotation about the boresight")
+    distance_m: float = _f(500.0, "m", 0.0, 1e6, "lidar to target centre", lo_open=True)
+    quaternion_wxyz: tuple[float, ...] = _f(
+        (), "-", doc="if given: target-body to sensor rotation, replaces pitch/azimuth/roll"
+    )
+
+
+@dataclass(frozen=True)
+class Fidelity:
+    subrays: int = _f(4, "1", 1, 1024, "sub-rays per pixel (a square number: 1, 4, 16, 64)")
+    time_step_s: float = _f(
+        0.0, "s", 0.0, 1e-7, "waveform time step; 0 = auto min(tau/10, 1/(20 B))"
+    )
+    noise_model: str = _f(
+        "statistical",
+        "-",
+        doc="noise model: statistical (PHYSICS.md Section 4)",
+        choices=("statistical",),
+    )
+
+
+PAPER_FORMS = (
+    "pulse_constant",  # Eq. 1: a = 3.5 instead of 2.446 (tau is then not the FWHM)
+    "eq30_4pi",  # Eq. 30: extra 1/(4 pi) and no cos(theta)
+    "eq25_risetime",  # Eq. 25: c * tau_r * sqrt(1+k^2) / (SNR (1-k))
+    "eq29_one_way",  # Eq. 29: one-way delays of the relief along the boresight
+    "eq28_paper",  # Eq. 28: 2.2 * (2 R_gate / c) * df * 0.5 erfc(TNR / sqrt 2)
+    "eq27_paper",  # Eq. 27: single-look, thermal-only 0.5 + 0.5 erf((SNR - TNR)/sqrt 2)
+    "unfiltered_peak",  # Eq. 14: SNR from the unfiltered peak
+    "qe_paper",  # quantum efficiency 0.6 ("about 0.6 for Si")
+)
+
+
+@dataclass(frozen=True)
+class Scene:
+    name: str = "paper"
+    seed: int = _f(0, "1", 0, 2**63 - 1, "seed of every random draw")
+    conventions: str = _f(
+        "ours",
+        "-",
+        doc="ours (PHYSICS.md, default) or paper (all the paper's literal forms)",
+        choices=("ours", "paper"),
+    )
+    paper_forms: tuple[str, ...] = _f(
+        (),
+        "-",
+        doc=f"individual paper forms on top of 'ours': {', '.join(PAPER_FORMS)}",
+        choices=PAPER_FORMS,
+    )
+    laser: Laser = field(default_factory=Laser)
+    transmit: TransmitOptics = field(default_factory=TransmitOptics)
+    receive: ReceiveOptics = field(default_factory=ReceiveOptics)
+    detector: Detector = field(default_factory=Detector)
+    amplifiers: Amplifiers = field(default_factory=Amplifiers)
+    timing: Timing = field(default_factory=Timing)
+    target: Target = field(default_factory=Target)
+    pose: Pose = field(default_factory=Pose)
+    fidelity: Fidelity = field(default_factory=Fidelity)
+
+    def __post_init__(self):
+        validate(self)
+
+    def uses(self, form: str) -> bool:
+        """True if the paper's literal form ``form`` (one of PAPER_FORMS) is in force."""
+        return self.conventions == "paper" or form in self.paper_forms
+
+    # -- derived quantities used by several stages ------------------------------------------------
+    @property
+    def illumination_angle_rad(self) -> float:
+        """Full angle of the illuminated disc: divergence / expansion ratio (Eq. 5)."""
+        return self.laser.divergence_rad / self.transmit.beam_expansion_ratio
+
+    @property
+    def ifov_rad(self) -> float:
+        """Angular size of one pixel (Eq. 23)."""
+        return self.receive.fov_rad / self.detector.pixels
+
+    @property
+    def focal_length_m(self) -> float:
+        """Receiver focal length f_r = D_array / theta_fov (Eq. 22)."""
+        return self.detector.pixels * self.detector.pixel_pitch_m / self.receive.fov_rad
+
+    @property
+    def gate_center_m(self) -> float:
+        return self.timing.gate_center_m or self.pose.distance_m
+
+    def to_dict(self) -> dict[str, Any]:
+        """Every resolved parameter as a plain, JSON- and TOML-ready dict."""
+        return _to_plain(self)
+
+
+SECTIONS = {
+    "laser": Laser,
+    "transmit": TransmitOptics,
+    "receive": ReceiveOptics,
+    "detector": Detector,
+    "amplifiers": Amplifiers,
+    "timing": Timing,
+    "target": Target,
+    "pose": Pose,
+    "fidelity": Fidelity,
+}
+
+# The quick parameters shared by the CLI --set, the app state and the Python keyword API.
+QUICK = {
+    "pitch_deg": "pose.pitch_deg",
+    "azimuth_deg": "pose.azimuth_deg",
+    "distance_m": "pose.distance_m",
+    "pixels": "detector.pixels",
+    "pulse_energy_j": "laser.pulse_energy_j",
+    "tnr": "timing.tnr",
+    "seed": "seed",
+}
+
+
+# ----------------------------------------------------------------------------------------------
+# validation
+# ----------------------------------------------------------------------------------------------
+def _range_text(meta) -> str:
+    lo, hi = meta["lo"], meta["hi"]
+    left = "(" if meta["lo_open"] else "["
+    return f"{left}{lo:g}, {hi:g}] {meta['unit']}".rstrip()
+
+
+def _check_number(key: str, value, meta, integer: bool) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise SceneError(f"{key}: expected a number, got {value!r}")
+    if integer and not float(value).is_integer():
+        raise SceneError(f"{key}: expected a whole number, got {value!r}")
+    if math.isnan(value):
+        raise SceneError(f"{key}: NaN is not a valid value; valid range {_range_text(meta)}")
+    lo, hi = meta["lo"], meta["hi"]
+    too_low = value <= lo if meta["lo_open"] else value < lo
+    if (lo is not None and too_low) or (hi is not None and value > hi):
+        raise SceneError(f"{key} = {value!r} is out of range; valid range {_range_text(meta)}")
+    if math.isinf(value) and not math.isinf(hi):
+        raise SceneError(f"{key}: infinite value; valid range {_range_text(meta)}")
+
+
+def _validate_fields(obj, prefix: str, names=None) -> None:
+    for f in dataclasses.fields(obj):
+        meta = f.metadata
+        if not meta or (names is not None and f.name not in names):
+            continue
+        key = f"{prefix}{f.name}"
+        value = getattr(obj, f.name)
+        values = value if isinstance(value, tuple) else (value,)
+        if meta["choices"] is not None:
+            for v in values:
+                if v not in meta["choices"]:
+                    raise SceneError(
+                        f"{key} = {v!r} is not valid; choose from {', '.join(meta['choices'])}"
+                    )
+        elif meta["lo"] is not None:
+            if not values:
+                raise SceneError(f"{key}: needs at least one value")
+            for v in values:
+                _check_number(key, v, meta, integer=isinstance(f.default, int))
+
+
+def validate(scene: Scene) -> None:
+    """Check every value and the cross-field rules; raise SceneError naming the key."""
+    _validate_fields(scene, "", names=("seed", "conventions", "paper_forms"))
+    for section in SECTIONS:
+        _validate_fields(getattr(scene, section), f"{section}.")
+    d = scene.detector
+    if d.gain_from == "bias" and d.bias_voltage_v >= d.breakdown_voltage_v:
+        raise SceneError(
+            f"detector.bias_voltage_v = {d.bias_voltage_v:g} V must be below "
+            f"detector.breakdown_voltage_v = {d.breakdown_voltage_v:g} V (Miller's law, Eq. 9)"
+        )
+    k = math.isqrt(scene.fidelity.subrays)
+    if k * k != scene.fidelity.subrays:
+        raise SceneError(
+            f"fidelity.subrays = {scene.fidelity.subrays} must be a square number "
+            "(1, 4, 9, 16, ...)"
+        )
+    a = scene.amplifiers
+    if len(a.noise_factors) != len(a.power_gains):
+        raise SceneError(
+            f"amplifiers.noise_factors has {len(a.noise_factors)} stages but "
+            f"amplifiers.power_gains has {len(a.power_gains)}: give one of each per stage"
+        )
+    q = scene.pose.quaternion_wxyz
+    if q and (len(q) != 4 or not all(math.isfinite(x) for x in q) or math.hypot(*q) < 1e-9):
+        raise SceneError(
+            f"pose.quaternion_wxyz = {q!r}: give 4 finite numbers w, x, y, z, not all 0"
+        )
+
+
+# ----------------------------------------------------------------------------------------------
+# building scenes from dicts, TOML and overrides
+# ----------------------------------------------------------------------------------------------
+def _coerce(key: str, f: dataclasses.Field, value):
+    """Bring a TOML/CLI value to the field's type; raise SceneError with the key on mismatch."""
+    default = f.default if f.default is not dataclasses.MISSING else None
+    if isinstance(default, tuple):
+        if f.name == "materials":
+            if isinstance(value, dict):
+                return tuple(sorted((str(k), str(v)) for k, v in value.items()))
+            if isinstance(value, (list, tuple)):
+                return tuple((str(k), str(v)) for k, v in value)
+            raise SceneError(f"{key}: expected a table part = material, got {value!r}")
+        if isinstance(value, (int, float, str)) and not isinstance(value, bool):
+            value = [value]
+        if not isinstance(value, (list, tuple)):
+            raise SceneError(f"{key}: expected a list, got {value!r}")
+        if f.name == "paper_forms":
+            return tuple(str(v) for v in value)
+        return tuple(_coerce_scalar(key, 0.0, v) for v in value)
+    return _coerce_scalar(key, default, value)
+
+
+def _coerce_scalar(key: str, default, value):
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise SceneError(f"{key}: expected true or false, got {value!r}")
+        return value
+    if isinstance(default, int):
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise SceneError(f"{key}: expected a whole number, got {value!r}")
+        if isinstance(value, float) and not value.is_integer():
+            raise SceneError(f"{key}: expected a whole number, got {value!r}")
+        return int(value)
+    if isinstance(default, float):
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise SceneError(f"{key}: expected a number, got {value!r}")
+        return float(value)
+    if isinstance(default, str):
+        if not isinstance(value, str):
+            raise SceneError(f"{key}: expected a string, got {value!r}")
+        return value
+    return value
+
+
+def _known_keys() -> list[str]:
+    keys = [f"{s}.{f.name}" for s, cls in SECTIONS.items() for f in dataclasses.fields(cls)]
+    return ["name", "seed", "conventions", "paper_forms", *keys, *QUICK]
+
+
+def _unknown(key: str) -> SceneError:
+    import difflib
+
+    close = difflib.get_close_matches(key, _known_keys(), n=3)
+    hint = f"; did you mean {', '.join(close)}?" if close else "; `lmapd keys` lists every key"
+    return SceneError(f"unknown scene key {key!r}{hint}")
+
+
+def scene_from_dict(data: dict[str, Any], base: Scene | None = None) -> Scene:
+    """Build a Scene from nested dicts (as read from TOML) on top of ``base`` (default: paper)."""
+    base = base or Scene()
+    flat: dict[str, Any] = {}
+    for key, value in data.items():
+        if key in SECTIONS:
+            if not isinstance(value, dict):
+                raise SceneError(f"[{key}] must be a table of keys, got {value!r}")
+            for sub, v in value.items():
+                flat[f"{key}.{sub}"] = v
+        else:
+            flat[key] = value
+    return with_overrides(base, flat)
+
+
+def with_overrides(scene: Scene, overrides: dict[str, Any] | None = None, **quick) -> Scene:
+    """Return a copy of ``scene`` with dotted keys (``laser.pulse_width_s``) or quick names
+    (``pitch_deg``) replaced. Unknown keys and invalid values raise SceneError naming the key."""
+    items = {**(overrides or {}), **quick}
+    if not items:
+        return scene
+    top: dict[str, Any] = {}
+    sections: dict[str, dict[str, Any]] = {}
+    for key, value in items.items():
+        dotted = QUICK.get(key, key)
+        if "." in dotted:
+            section, name = dotted.split(".", 1)
+            cls = SECTIONS.get(section)
+            if cls is None:
+                raise _unknown(key)
+            fields = {f.name: f for f in dataclasses.fields(cls)}
+            if name not in fields:
+                raise _unknown(key)
+            sections.setdefault(section, {})[name] = _coerce(dotted, fields[name], value)
+        else:
+            fields = {f.name: f for f in dataclasses.fields(Scene) if f.name not in SECTIONS}
+            if dotted not in fields:
+                raise _unknown(key)
+            f = fields[dotted]
+            if dotted == "name":
+                top[dotted] = str(value)
+            else:
+                top[dotted] = _coerce(dotted, f, value)
+    for section, changes in sections.items():
+        top[section] = dataclasses.replace(getattr(scene, section), **changes)
+    return dataclasses.replace(scene, **top)
+
+
+def parse_assignment(text: str) -> tuple[str, Any]:
+    """Parse ``NAME=VALUE`` from the command line; VALUE is read as TOML (numbers, strings,
+    lists), falling back to a bare string."""
+    if "=" not in text:
+        raise SceneError(f"--set expects NAME=VALUE, got {text!r}")
+    key, raw = text.split("=", 1)
+    key = key.strip()
+    try:
+        value = tomllib.loads(f"v = {raw.strip()}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw.strip()
+    return key, value
+
+
+def builtin_scenes() -> list[str]:
+    return sorted(p.stem for p in SCENES_DIR.glob("*.toml"))
+
+
+def load_scene(source: str | Path | None = None) -> Scene:
+    """Load a scene: None or a built-in name (``paper``) or a path to a TOML file."""
+    if source is None:
+        source = "paper"
+    path = Path(source)
+    if not path.suffix and (SCENES_DIR / f"{source}.toml").exists():
+        path = SCENES_DIR / f"{source}.toml"
+    if not path.exists():
+        names = ", ".join(builtin_scenes())
+        raise SceneError(f"scene file not found: {source} (built-in scenes: {names})")
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise SceneError(f"{path}: not valid TOML: {exc}") from None
+    data.setdefault("name", path.stem)
+    scene = scene_from_dict(data)
+    # a relative mesh path in a scene file is relative to that file
+    mesh = scene.target.mesh
+    if any(mesh.lower().endswith(ext) for ext in MESH_SUFFIXES) and not Path(mesh).is_absolute():
+        scene = with_overrides(scene, {"target.mesh": str((path.parent / mesh).resolve())})
+    return scene
+
+
+MESH_SUFFIXES = (".glb", ".gltf", ".obj", ".stl", ".ply")
+
+
+def _to_plain(obj):
+    if dataclasses.is_dataclass(obj):
+        out = {}
+        for f in dataclasses.fields(obj):
+            v = getattr(obj, f.name)
+            if f.name == "materials":
+                out[f.name] = dict(v)
+            else:
+                out[f.name] = _to_plain(v)
+        return out
+    if isinstance(obj, tuple):
+        return [_to_plain(v) for v in obj]
+    if isinstance(obj, float) and math.isinf(obj):
+        return "inf"
+    return obj
+
+
+def dump_scene(scene: Scene) -> str:
+    """The scene as TOML text that load_scene reads back to an equal Scene."""
+    data = scene.to_dict()
+    data["detector"]["snr_max"] = (
+        scene.detector.snr_max if math.isfinite(scene.detector.snr_max) else 1e300
+    )
+    return tomli_w.dumps(data)
+
+
+def key_reference() -> list[dict[str, str]]:
+    """One row per scene key: key, unit, default, valid range, doc (for `lmapd keys`, README)."""
+    rows = []
+    for name in ("seed", "conventions", "paper_forms"):
+        f = next(f for f in dataclasses.fields(Scene) if f.name == name)
+        rows.append(_row(name, f))
+    for section, cls in SECTIONS.items():
+        for f in dataclasses.fields(cls):
+            rows.append(_row(f"{section}.{f.name}", f))
+    return rows
+
+
+def _row(key, f):
+    m = f.metadata
+    if m["choices"] is not None:
+        valid = " / ".join(m["choices"])
+    elif m["lo"] is not None:
+        valid = _range_text(m)
+    else:
+        valid = ""
+    default = f.default
+    return {
+        "key": key,
+        "unit": m["unit"],
+        "default": repr(default) if isinstance(default, str) else str(default),
+        "valid": valid,
+        "doc": m["doc"],
+    }

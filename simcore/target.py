@@ -1,0 +1,211 @@
+"""Targets: load a mesh (glTF/OBJ/STL/PLY), scale it to metres, centre it, and label each face with
+its part (submesh material or name) and the part's material from a material map.
+
+The target frame is the mesh's own axes, scaled to metres, with the origin at the centre of the
+bounding box (the body origin the lidar tracks).
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from .materials import LIBRARY, read_material_map
+from .scene import ASSETS_DIR, MESH_SUFFIXES, Target
+
+TARGETS_DIR = ASSETS_DIR / "targets"
+MAX_FACES = 5_000_000
+
+
+class TargetError(ValueError):
+    """A mesh file is missing, unreadable or degenerate. The message names the file."""
+
+
+@dataclass(frozen=True)
+class TargetModel:
+    """A target mesh ready for ray casting.
+
+    Attributes
+    ----------
+    mesh : trimesh.Trimesh
+        Vertices in metres, target frame (origin at the bounding-box centre).
+    face_part : (n_faces,) int32
+        Index into ``part_names`` for each face.
+    part_names : tuple of str
+        Part names (glTF material names for the MRO).
+    part_materials : tuple of str
+        Library material of each part, after the material map and the scene's overrides.
+    name, credit : str
+        Display name and the credit line to show wherever the model is shown.
+    """
+
+    mesh: trimesh.Trimesh
+    face_part: np.ndarray
+    part_names: tuple[str, ...]
+    part_materials: tuple[str, ...]
+    name: str
+    credit: str
+    source: str
+
+    @property
+    def face_material(self) -> np.ndarray:
+        """(n_faces,) int32 index into ``material_names`` for each face."""
+        lookup = np.array([self.material_names.index(m) for m in self.part_materials], np.int32)
+        return lookup[self.face_part]
+
+    @property
+    def face_material_library(self) -> np.ndarray:
+        """(n_faces,) int32 index into materials.MATERIAL_NAMES (stable across targets)."""
+        names = list(LIBRARY)
+        lookup = np.array([names.index(m) for m in self.part_materials], np.int32)
+        return lookup[self.face_part]
+
+    @property
+    def material_names(self) -> tuple[str, ...]:
+        """Distinct materials used by this target, in library order."""
+        used = set(self.part_materials)
+        return tuple(n for n in LIBRARY if n in used)
+
+    @property
+    def radius_m(self) -> float:
+        """Radius of the bounding sphere about the target origin [m]."""
+        return float(np.linalg.norm(self.mesh.vertices, axis=1).max())
+
+
+def builtin_targets() -> list[str]:
+    return sorted(p.parent.name for p in TARGETS_DIR.glob("*/target.toml"))
+
+
+def _resolve(target: Target) -> tuple[Path, dict, Path | None]:
+    """Mesh path, target settings and the directory of a built-in target's files."""
+    spec = target.mesh
+    builtin = TARGETS_DIR / spec / "target.toml"
+    if builtin.exists():
+        settings = tomllib.loads(builtin.read_text(encoding="utf-8"))
+        return builtin.parent / settings["mesh"], settings, builtin.parent
+    path = Path(spec).expanduser()
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise TargetError(
+            f"target.mesh = {spec!r}: not a built-in target ({', '.join(builtin_targets())}) "
+            f"nor a mesh file ({', '.join(MESH_SUFFIXES)})"
+        )
+    if not path.is_file():
+        raise TargetError(f"target.mesh: file not found: {path}")
+    return path, {"name": path.stem, "credit": ""}, None
+
+
+def _read_parts(path: Path) -> list[tuple[str, trimesh.Trimesh]]:
+    """Read a mesh file as (part name, mesh) pairs with scene transforms applied."""
+    try:
+        loaded = trimesh.load(path, force=None)
+    except Exception as exc:  # trimesh raises many types for malformed files
+        raise TargetError(f"{path}: cannot read the mesh ({type(exc).__name__}: {exc})") from None
+    if isinstance(loaded, trimesh.Scene):
+        geoms = loaded.dump(concatenate=False)
+    else:
+        geoms = [loaded]
+    parts = []
+    for i, g in enumerate(geoms):
+        if not isinstance(g, trimesh.Trimesh):
+            continue  # point clouds, paths: nothing to hit
+        material = getattr(getattr(g, "visual", None), "material", None)
+        name = getattr(material, "name", None) or g.metadata.get("name") or f"part{i}"
+        parts.append((str(name), g))
+    return parts
+
+
+def load_target(target: Target) -> TargetModel:
+    """Load, check, scale and label a target mesh (the scene's per-part material overrides are
+    applied later by :func:`with_materials`, so changing them never reloads the mesh).
+
+    Raises
+    ------
+    TargetError
+        Missing file, unreadable or empty mesh, NaN/inf vertices, zero total area, too many faces.
+    """
+    path, settings, folder = _resolve(target)
+    parts = _read_parts(path)
+    n_faces = sum(len(g.faces) for _, g in parts)
+    if n_faces == 0:
+        raise TargetError(f"{path}: the mesh has no triangles")
+    if n_faces > MAX_FACES:
+        raise TargetError(f"{path}: {n_faces} triangles is more than the {MAX_FACES} allowed")
+    vertices = np.concatenate([g.vertices for _, g in parts]).astype(np.float64)
+    if not np.isfinite(vertices).all():
+        raise TargetError(f"{path}: the mesh has NaN or infinite vertex coordinates")
+    offsets = np.cumsum([0] + [len(g.vertices) for _, g in parts[:-1]])
+    faces = np.concatenate([g.faces + o for (_, g), o in zip(parts, offsets, strict=True)])
+    names = sorted({n for n, _ in parts})
+    face_part = np.concatenate([np.full(len(g.faces), names.index(n), np.int32) for n, g in parts])
+    mesh = trimesh.Trimesh(vertices, faces, process=False, validate=False)
+    if not mesh.area > 0:
+        raise TargetError(f"{path}: the mesh has zero surface area (degenerate triangles)")
+
+    extents = mesh.extents
+    if target.scale_m_per_unit > 0:
+        scale = target.scale_m_per_unit
+    elif "longest_extent_m" in settings:
+        scale = settings["longest_extent_m"] / extents.max()
+    else:
+        scale = float(settings.get("scale_m_per_unit", 1.0))
+    mesh.apply_translation(-mesh.bounds.mean(axis=0))
+    mesh.apply_scale(scale)
+
+    mapping = _material_map(target, folder)
+    materials = tuple(mapping.get(n, mapping["*"]) for n in names)
+    return TargetModel(
+        mesh=mesh,
+        face_part=face_part,
+        part_names=tuple(names),
+        part_materials=materials,
+        name=str(settings.get("name", path.stem)),
+        credit=str(settings.get("credit", "")),
+        source=str(path),
+    )
+
+
+def _material_map(target: Target, folder: Path | None) -> dict[str, str]:
+    if target.material_map:
+        mapping = _read_map(Path(target.material_map))
+    elif folder is not None:
+        settings = tomllib.loads((folder / "target.toml").read_text(encoding="utf-8"))
+        mapping = _read_map(folder / settings.get("material_map", "materials.toml"))
+    else:
+        mapping = {"*": "coating_2"}
+    return mapping
+
+
+def _read_map(path: Path) -> dict[str, str]:
+    try:
+        return read_material_map(path)
+    except (FileNotFoundError, ValueError) as exc:
+        raise TargetError(f"target.material_map: {exc}") from None
+
+
+def with_materials(model: TargetModel, overrides) -> TargetModel:
+    """The same geometry with some parts' materials replaced (no reload, no new BVH)."""
+    mats = dict(zip(model.part_names, model.part_materials, strict=True))
+    for part, name in overrides:
+        if name not in LIBRARY:
+            raise TargetError(
+                f"target.materials.{part} = {name!r}: unknown material; "
+                f"the library has {', '.join(LIBRARY)}"
+            )
+        if part not in mats:
+            raise TargetError(
+                f"target.materials: unknown part {part!r}; parts are {', '.join(model.part_names)}"
+            )
+        mats[part] = name
+    return TargetModel(
+        mesh=model.mesh,
+        face_part=model.face_part,
+        part_names=model.part_names,
+        part_materials=tuple(mats[n] for n in model.part_names),
+        name=model.name,
+        credit=model.credit,
+        source=model.source,
+    )

@@ -79,15 +79,16 @@ class PoseInSensor:
     translation_m: np.ndarray  # (3,)
 
 
-def target_pose(pose: Pose, extents) -> PoseInSensor:
+def target_pose(pose: Pose, extents, body_from_mesh=None) -> PoseInSensor:
     """The target's pose in the sensor frame, its origin on the boresight at ``distance_m``.
 
     With no quaternion: R = Rz(roll) Rx(pitch) Ry(azimuth) R0, rotations about the sensor's own axes
     applied to the front view R0 (azimuth first, then pitch, then roll). With ``quaternion_wxyz``
-    (target body -> sensor), that rotation is used as it is.
+    (target body -> sensor, as orbit.relative_pose_series gives it): R = Q @ body_from_mesh.
     """
     if pose.quaternion_wxyz:
-        rot = quaternion_matrix(pose.quaternion_wxyz)
+        body = np.eye(3) if body_from_mesh is None else body_from_mesh
+        rot = quaternion_matrix(pose.quaternion_wxyz) @ body
     else:
         rot = (
             rotation_z(np.radians(pose.roll_deg))

@@ -240,7 +240,7 @@ def stage_rays(scene: Scene) -> geometry.RayGrid:
 
 
 def stage_hits(scene: Scene, tgt: TargetStage, rays: geometry.RayGrid) -> geometry.Hits:
-    pose = geometry.target_pose(scene.pose, tgt.model.mesh.extents)
+    pose = geometry.target_pose(scene.pose, tgt.model.mesh.extents, tgt.model.body_from_mesh)
     hits = geometry.cast(tgt.caster, rays, pose)
     _readonly(hits.range_m, hits.cos_theta, hits.face, hits.depth_m)
     return hits

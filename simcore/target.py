@@ -50,6 +50,7 @@ class TargetModel:
     name: str
     credit: str
     source: str
+    body_from_mesh: np.ndarray  # (3, 3) rotation: p_body = body_from_mesh @ p_mesh
 
     @property
     def face_material(self) -> np.ndarray:
@@ -157,6 +158,13 @@ def load_target(target: Target) -> TargetModel:
 
     mapping = _material_map(target, folder)
     materials = tuple(mapping.get(n, mapping["*"]) for n in names)
+    body = np.asarray(settings.get("body_from_mesh", np.eye(3)), dtype=np.float64)
+    if (
+        body.shape != (3, 3)
+        or not np.allclose(body @ body.T, np.eye(3), atol=1e-9)
+        or not (np.isclose(np.linalg.det(body), 1.0))
+    ):
+        raise TargetError(f"{path}: body_from_mesh must be a 3 x 3 rotation matrix")
     return TargetModel(
         mesh=mesh,
         face_part=face_part,
@@ -165,6 +173,7 @@ def load_target(target: Target) -> TargetModel:
         name=str(settings.get("name", path.stem)),
         credit=str(settings.get("credit", "")),
         source=str(path),
+        body_from_mesh=body,
     )
 
 
@@ -195,9 +204,13 @@ def with_materials(model: TargetModel, overrides) -> TargetModel:
                 f"target.materials.{part} = {name!r}: unknown material; "
                 f"the library has {', '.join(LIBRARY)}"
             )
+        if part == "*":  # every part
+            mats = dict.fromkeys(mats, name)
+            continue
         if part not in mats:
             raise TargetError(
-                f"target.materials: unknown part {part!r}; parts are {', '.join(model.part_names)}"
+                f"target.materials: unknown part {part!r}; parts are "
+                f"{', '.join(model.part_names)} (or * for all)"
             )
         mats[part] = name
     return TargetModel(
@@ -208,4 +221,5 @@ def with_materials(model: TargetModel, overrides) -> TargetModel:
         name=model.name,
         credit=model.credit,
         source=model.source,
+        body_from_mesh=model.body_from_mesh,
     )

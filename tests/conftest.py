@@ -1,0 +1,44 @@
+"""Shared fixtures: small synthetic targets written as real mesh files, and a fast base scene."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+import simcore
+
+
+def write_plates(path, plates):
+    """Write square plates facing -z (towards a lidar looking along +z) as one OBJ.
+
+    plates : list of (size_m, z_offset_m, tilt_deg about the y axis)
+    """
+    meshes = []
+    for size, z, tilt in plates:
+        box = trimesh.creation.box(extents=(size, size, 1e-3))
+        box.apply_transform(trimesh.transformations.rotation_matrix(np.radians(tilt), (0, 1, 0)))
+        box.apply_translation((0, 0, z))
+        meshes.append(box)
+    trimesh.util.concatenate(meshes).export(path)
+    return str(path)
+
+
+@pytest.fixture
+def plate_scene(tmp_path):
+    """A 4 m Lambertian plate square to the boresight (its smallest extent along the line of sight),
+    64 x 64 pixels, 1 sub-ray, 1 m per unit."""
+
+    def make(size_m=4.0, tilt_deg=0.0, plates=None, **overrides):
+        mesh = write_plates(tmp_path / "plate.obj", plates or [(size_m, 0.0, tilt_deg)])
+        base = {
+            "target.mesh": mesh,
+            "target.scale_m_per_unit": 1.0,
+            "target.materials": {"*": "lambertian"},
+            "pixels": 64,
+            "fidelity.subrays": 1,
+        }
+        base.update(overrides)
+        return simcore.with_overrides(simcore.Scene(), base)
+
+    return make

@@ -47,7 +47,9 @@ def peak_memory_mb(pixels: int, subrays: int) -> tuple[float, float]:
     """Peak RSS [MB] of a fresh process after imports and after one frame (ru_maxrss, in kB)."""
     out = subprocess.run(
         [sys.executable, "-c", _MEMORY_PROBE.format(pixels=pixels, subrays=subrays)],
-        check=True, capture_output=True, text=True,
+        check=True,
+        capture_output=True,
+        text=True,
     ).stdout.split()
     return float(out[0]) / 1024.0, float(out[1]) / 1024.0
 
@@ -76,8 +78,10 @@ def run(quick: bool = False) -> dict:
 
     base = with_overrides(scene, {"pixels": 256, "fidelity.subrays": 4})
     rerun = {}
-    for name, key, values in (("tnr", "tnr", (5.0, 5.1)), ("pulse_energy", "pulse_energy_j",
-                                                             (5e-3, 5.1e-3))):
+    for name, key, values in (
+        ("tnr", "tnr", (5.0, 5.1)),
+        ("pulse_energy", "pulse_energy_j", (5e-3, 5.1e-3)),
+    ):
         pair = [with_overrides(base, {key: v}) for v in values]
         total, _ = _median_run(pipe, pair, repeats * 2)
         rerun[name] = total

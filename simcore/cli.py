@@ -118,7 +118,9 @@ def build_parser() -> argparse.ArgumentParser:
     sim = sub.add_parser("simulate", help="simulate one flash and write its point cloud")
     sim.add_argument("scene", nargs="?", help="scene TOML file or built-in name (default: paper)")
     sim.add_argument(
-        "--set", action="append", metavar="NAME=VALUE",
+        "--set",
+        action="append",
+        metavar="NAME=VALUE",
         help="override a scene key (pitch_deg, azimuth_deg, distance_m, pixels, pulse_energy_j, "
         "tnr, seed, or any dotted key such as laser.pulse_width_s); repeatable",
     )

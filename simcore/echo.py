@@ -217,19 +217,30 @@ def _eval_exact(shape: PulseShape, table, arrivals, weights, t):
     return np.einsum("nk,nk->n", weights, shape.lookup(table, t[:, None] - arrivals))
 
 
+def _refined_peak(shape, table, arrivals, weights, grid, y, dt):
+    """Peak of each row of y: best sample, parabolic vertex, exact value there."""
+    rows = np.arange(len(y))
+    j = np.clip(np.argmax(y, axis=1), 1, y.shape[1] - 2)
+    y0, y1, y2 = y[rows, j - 1], y[rows, j], y[rows, j + 1]
+    den = y0 - 2 * y1 + y2
+    off = np.where(den < 0, 0.5 * (y0 - y2) / np.where(den < 0, den, -1.0), 0.0)
+    t_v = grid[rows, j] + np.clip(off, -1, 1) * dt
+    # one more parabolic step on exact values, a quarter sample either side
+    h = dt / 4
+    e0, e1, e2 = (_eval_exact(shape, table, arrivals, weights, t_v + s * h) for s in (-1, 0, 1))
+    den = e0 - 2 * e1 + e2
+    off = np.where(den < 0, 0.5 * (e0 - e2) / np.where(den < 0, den, -1.0), 0.0)
+    t_v = t_v + np.clip(off, -1, 1) * h
+    return np.maximum(_eval_exact(shape, table, arrivals, weights, t_v), np.maximum(e1, y1))
+
+
 def _features_chunk(shape, arrivals, weights, t_first, n_samples, dt, t_d, k_att, raw):
     n = len(arrivals)
     grid = t_first[:, None] + shape.t_start_s + dt * np.arange(n_samples)[None, :]  # (n, L)
     y = np.einsum("nlk,nk->nl", shape.filtered_at(grid[:, :, None] - arrivals[:, None, :]), weights)
     rows = np.arange(n)
 
-    # peak: best sample, parabolic vertex, exact value there
-    j = np.clip(np.argmax(y, axis=1), 1, n_samples - 2)
-    y0, y1, y2 = y[rows, j - 1], y[rows, j], y[rows, j + 1]
-    den = y0 - 2 * y1 + y2
-    off = np.where(den < 0, 0.5 * (y0 - y2) / np.where(den < 0, den, -1.0), 0.0)
-    t_vertex = grid[rows, j] + np.clip(off, -1, 1) * dt
-    peak = np.maximum(_eval_exact(shape, shape.filtered, arrivals, weights, t_vertex), y1)
+    peak = _refined_peak(shape, shape.filtered, arrivals, weights, grid, y, dt)
 
     # half-maximum crossing: bracket on the grid, then regula falsi on exact values
     half = 0.5 * peak
@@ -275,7 +286,7 @@ def _features_chunk(shape, arrivals, weights, t_first, n_samples, dt, t_d, k_att
     peak_raw = None
     if raw:
         yr = np.einsum("nlk,nk->nl", shape.raw_at(grid[:, :, None] - arrivals[:, None, :]), weights)
-        peak_raw = yr.max(axis=1)
+        peak_raw = _refined_peak(shape, shape.raw, arrivals, weights, grid, yr, dt)
     return peak, t_half, slope, peak_raw
 
 

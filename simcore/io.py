@@ -91,8 +91,15 @@ def waveform_cube(result, max_elements: int = 1 << 22) -> dict[str, np.ndarray]:
     has = e.weights > 0
     t_first = np.where(has, e.arrivals_s, np.inf).min(axis=1)
     t_last = np.where(has, e.arrivals_s, -np.inf).max(axis=1)
-    length = int(np.ceil((np.max(t_last - t_first, initial=0.0) + e.shape.t_end_s
-                          - e.shape.t_start_s) / e.dt_s)) + 1
+    length = (
+        int(
+            np.ceil(
+                (np.max(t_last - t_first, initial=0.0) + e.shape.t_end_s - e.shape.t_start_s)
+                / e.dt_s
+            )
+        )
+        + 1
+    )
     n, k = e.weights.shape
     t0 = t_first + e.shape.t_start_s
     raw = np.zeros((n, length))

@@ -68,8 +68,8 @@ def brdf(cos_theta, A, B, m, s):
     A, B, m, s = (np.asarray(x, dtype=np.float64) for x in (A, B, m, s))
     front = c > 0
     cc = np.where(front, np.minimum(c, 1.0), 1.0)
-    tan2 = (1.0 - cc * cc) / (cc * cc)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        tan2 = (1.0 - cc * cc) / (cc * cc)  # inf for a denormal cos: the specular term is then 0
         log_spec = np.log(np.where(A > 0, A, 1.0)) - tan2 / np.where(s > 0, s, 1.0) ** 2
         log_spec = log_spec - 6.0 * np.log(cc)
     spec = np.where(A > 0, np.exp(np.minimum(log_spec, 700.0)), 0.0)

@@ -11,6 +11,7 @@ leaves out (PHYSICS.md section 3).
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -392,12 +393,10 @@ def _known_keys() -> list[str]:
     return ["name", "seed", "conventions", "paper_forms", *keys, *QUICK]
 
 
-def _unknown(key: str) -> SceneError:
-    import difflib
-
-    close = difflib.get_close_matches(key, _known_keys(), n=3)
+def _unknown(key: str, what: str | None = None, candidates=None) -> SceneError:
+    close = difflib.get_close_matches(key.strip("[]"), candidates or _known_keys(), n=3)
     hint = f"; did you mean {', '.join(close)}?" if close else "; `lmapd keys` lists every key"
-    return SceneError(f"unknown scene key {key!r}{hint}")
+    return SceneError(f"{what or f'unknown scene key {key!r}'}{hint}")
 
 
 def scene_from_dict(data: dict[str, Any], base: Scene | None = None) -> Scene:
@@ -405,6 +404,8 @@ def scene_from_dict(data: dict[str, Any], base: Scene | None = None) -> Scene:
     base = base or Scene()
     flat: dict[str, Any] = {}
     for key, value in data.items():
+        if isinstance(value, dict) and key not in SECTIONS:
+            raise _unknown(f"[{key}]", f"unknown scene section [{key}]", list(SECTIONS))
         if key in SECTIONS:
             if not isinstance(value, dict):
                 raise SceneError(f"[{key}] must be a table of keys, got {value!r}")
@@ -492,30 +493,23 @@ def load_scene(source: str | Path | None = None) -> Scene:
 MESH_SUFFIXES = (".glb", ".gltf", ".obj", ".stl", ".ply")
 
 
-def _to_plain(obj):
+def _to_plain(obj, inf_as_text: bool = True):
     if dataclasses.is_dataclass(obj):
         out = {}
         for f in dataclasses.fields(obj):
             v = getattr(obj, f.name)
-            if f.name == "materials":
-                out[f.name] = dict(v)
-            else:
-                out[f.name] = _to_plain(v)
+            out[f.name] = dict(v) if f.name == "materials" else _to_plain(v, inf_as_text)
         return out
     if isinstance(obj, tuple):
-        return [_to_plain(v) for v in obj]
-    if isinstance(obj, float) and math.isinf(obj):
-        return "inf"
+        return [_to_plain(v, inf_as_text) for v in obj]
+    if inf_as_text and isinstance(obj, float) and math.isinf(obj):
+        return "inf"  # strict JSON has no infinity
     return obj
 
 
 def dump_scene(scene: Scene) -> str:
-    """The scene as TOML text that load_scene reads back to an equal Scene."""
-    data = scene.to_dict()
-    data["detector"]["snr_max"] = (
-        scene.detector.snr_max if math.isfinite(scene.detector.snr_max) else 1e300
-    )
-    return tomli_w.dumps(data)
+    """The scene as TOML text that load_scene reads back to an equal Scene (TOML has inf)."""
+    return tomli_w.dumps(_to_plain(scene, inf_as_text=False))
 
 
 def key_reference() -> list[dict[str, str]]:

@@ -10,7 +10,7 @@ from simcore.materials import LIBRARY, brdf, material_brdf, read_material_map
 
 def eq6(theta, A, B, m, s):
     c = np.cos(theta)
-    return A / c**6 * np.exp(-np.tan(theta) ** 2 / s**2) + B * c**m
+    return A / c**6 * np.exp(-(np.tan(theta) ** 2) / s**2) + B * c**m
 
 
 @pytest.mark.parametrize("name", ["solar_panel", "coating_1", "coating_2", "ideal_specular"])

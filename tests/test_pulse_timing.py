@@ -119,4 +119,4 @@ def test_cfd_slope_of_a_single_pulse_is_the_half_max_slope():
     slope = (shape.filtered_at(shape.t_half_s + h) - shape.filtered_at(shape.t_half_s - h)) / (
         2 * h
     )
-    assert feats.cfd_slope_per_s[0] == pytest.approx(slope / shape.peak_w_per_j, rel=0.03)
+    assert feats.cfd_slope_per_s[0] == pytest.approx(slope / shape.peak_w_per_j, rel=1e-3)

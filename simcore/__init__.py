@@ -12,6 +12,7 @@ from .materials import MATERIAL_NAMES, Material, brdf
 from .pipeline import STAGES, Pipeline, Result, Waveform, simulate
 from .scene import (
     PAPER_FORMS,
+    PRESETS,
     QUICK,
     Scene,
     SceneError,
@@ -28,6 +29,7 @@ __all__ = [
     "MATERIALS",
     "MATERIAL_NAMES",
     "PAPER_FORMS",
+    "PRESETS",
     "QUICK",
     "STAGES",
     "Material",

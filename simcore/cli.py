@@ -19,7 +19,14 @@ from pathlib import Path
 
 from . import io
 from .materials import MATERIAL_NAMES
-from .scene import SceneError, key_reference, load_scene, parse_assignment, with_overrides
+from .scene import (
+    PRESETS,
+    SceneError,
+    key_reference,
+    load_scene,
+    parse_assignment,
+    with_overrides,
+)
 from .target import TargetError
 
 EXIT_USAGE = 2
@@ -33,6 +40,8 @@ class CliError(Exception):
 def _scene_from_args(args):
     scene = load_scene(args.scene)
     overrides = dict(parse_assignment(s) for s in args.set or [])
+    if getattr(args, "preset", None):
+        overrides = {"preset": args.preset, **overrides}
     return with_overrides(scene, overrides)
 
 
@@ -123,6 +132,9 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="NAME=VALUE",
         help="override a scene key (pitch_deg, azimuth_deg, distance_m, pixels, pulse_energy_j, "
         "tnr, seed, or any dotted key such as laser.pulse_width_s); repeatable",
+    )
+    sim.add_argument(
+        "--preset", choices=sorted(PRESETS), help="fidelity preset (sub-rays, time step)"
     )
     sim.add_argument("--out", required=True, help="point cloud file (.ply)")
     sim.add_argument("--summary", help="JSON summary file")

@@ -5,6 +5,8 @@
     lmapd keys [--markdown]
     lmapd bench [--quick] [--json FILE]
     lmapd app [--host 127.0.0.1] [--port 8080] [--scene SCENE]
+    lmapd flyaround [SCENE.toml] [--set NAME=VALUE ...] --out DIR [--interval-s 300]
+                    [--duration-s SECONDS] [--j2]
 
 Errors in the user's input (unknown key, value out of range, missing or broken file) print one
 message naming what is wrong and exit with status 2; no output file is left half-written.
@@ -17,7 +19,7 @@ import importlib
 import sys
 from pathlib import Path
 
-from . import io
+from . import flyaround, io
 from .materials import MATERIAL_NAMES
 from .scene import (
     PRESETS,
@@ -155,6 +157,8 @@ def build_parser() -> argparse.ArgumentParser:
     app.add_argument("--port", type=int, default=8080)
     app.add_argument("--scene", help="scene TOML file or built-in name (default: paper)")
     app.set_defaults(func=cmd_app)
+
+    flyaround.add_parser(sub)
     return parser
 
 

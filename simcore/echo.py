@@ -87,17 +87,27 @@ class PulseShape:
     peak_w_per_j: float
     t_start_s: float  # before this the band-limited pulse is < 1e-5 of its peak
     t_end_s: float  # after this it is < 1e-4 of its peak
+    filtered_slope: np.ndarray  # (N,) next-sample differences of the tables, for the lookup
+    raw_slope: np.ndarray
 
     def lookup(self, table: np.ndarray, t_s):
-        """Linear interpolation of a table at times t (0 outside it)."""
-        x = (np.asarray(t_s) - self.t0_s) * (1.0 / self.step_s)
-        i = np.floor(x)
-        frac = x - i
-        i = i.astype(np.int64)
-        inside = (i >= 0) & (i < len(table) - 1)
-        i = np.where(inside, i, 0)
-        v = table[i] + frac * (table[i + 1] - table[i])
-        return np.where(inside, v, 0.0)
+        """Linear interpolation of ``filtered`` or ``raw`` at times t. Both tables are ~0 at their
+        ends (< 1e-10 of the peak), so times outside them clamp to an end value."""
+        slopes = self._slopes[id(table)]
+        shape = np.shape(t_s)
+        x = np.array(t_s, dtype=np.float64, ndmin=1)  # a copy, worked on in place
+        x -= self.t0_s
+        x *= 1.0 / self.step_s
+        np.clip(x, 0.0, len(table) - 2, out=x)
+        i = x.astype(np.int32)
+        x -= i  # the fraction
+        x *= slopes[i]
+        x += table[i]
+        return x.reshape(shape)
+
+    @property
+    def _slopes(self) -> dict[int, np.ndarray]:
+        return {id(self.filtered): self.filtered_slope, id(self.raw): self.raw_slope}
 
     def rising_time_s(self, fraction: float) -> float:
         """Time on the rising edge where the band-limited pulse is ``fraction`` of its peak."""
@@ -131,10 +141,11 @@ def pulse_shape(tau_s: float, a: float, bandwidth_hz: float) -> PulseShape:
     t_half = optimize.brentq(half, t0, t_pk, xtol=1e-16, rtol=1e-14)
     start = t[np.argmax(filt > 1e-5 * peak)]
     end = t[len(t) - 1 - np.argmax(filt[::-1] > 1e-4 * peak)]
-    for arr in (filt, raw):
+    slopes = [np.diff(arr, append=arr[-1]) for arr in (filt, raw)]
+    for arr in (filt, raw, *slopes):
         arr.setflags(write=False)
     return PulseShape(
-        tau_s, a, sigma, t0, float(t[1] - t[0]), filt, raw, t_half, t_pk, peak, start, end
+        tau_s, a, sigma, t0, float(t[1] - t[0]), filt, raw, t_half, t_pk, peak, start, end, *slopes
     )
 
 
@@ -322,7 +333,7 @@ def echo_features(
     t_d: float,
     k_att: float,
     raw_peak: bool = False,
-    max_elements: int = 1 << 22,
+    max_elements: int = 1 << 20,
 ) -> EchoFeatures:
     """Peak, half-maximum time and CFD slope of each pixel's band-limited echo.
 

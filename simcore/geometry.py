@@ -102,22 +102,34 @@ def target_pose(pose: Pose, extents, body_from_mesh=None) -> PoseInSensor:
 # ----------------------------------------------------------------------------------------------
 # the pixel grid
 # ----------------------------------------------------------------------------------------------
-def pixel_offsets(pixels: int, fov_rad: float, subrays_per_side: int = 1):
-    """Focal-plane tangents (x/f, y/f) of pixel centres or of their sub-pixel centres.
+def subray_tangents(pixels: int, fov_rad: float, subrays_per_side: int, pixel_index=None):
+    """Focal-plane tangents (x/f, y/f) of the k x k sub-pixel centres of some pixels.
+
+    Parameters
+    ----------
+    pixel_index : (n,) int, optional -- flat pixel indices (row * pixels + col); all if None
 
     Returns
     -------
-    tx, ty : (pixels, pixels, k, k) float64
-        Tangent of the angle from the boresight along x (columns) and y (rows) of each sub-ray; the
-        k x k sub-rays sample each pixel's field on a regular grid of sub-pixel centres.
+    tx, ty : (n, k, k) float64 -- tangents along x (columns) and y (rows); the k x k sub-rays
+        sample each pixel's field on a regular grid of sub-pixel centres
     """
+    if pixel_index is None:
+        pixel_index = np.arange(pixels * pixels)
     pitch = 2.0 * np.tan(fov_rad / 2.0) / pixels  # tangent-plane size of one pixel
     k = subrays_per_side
-    centres = (np.arange(pixels) - (pixels - 1) / 2.0) * pitch
+    row, col = np.divmod(np.asarray(pixel_index), pixels)
     sub = (np.arange(k) - (k - 1) / 2.0) * pitch / k
-    tx = centres[None, :, None, None] + sub[None, None, None, :]
-    ty = centres[:, None, None, None] + sub[None, None, :, None]
-    return np.broadcast_to(tx, (pixels, pixels, k, k)), np.broadcast_to(ty, (pixels, pixels, k, k))
+    tx = ((col - (pixels - 1) / 2.0) * pitch)[:, None, None] + sub[None, None, :]
+    ty = ((row - (pixels - 1) / 2.0) * pitch)[:, None, None] + sub[None, :, None]
+    return np.broadcast_arrays(tx, ty)
+
+
+def subray_directions(pixels: int, fov_rad: float, subrays: int, pixel_index=None):
+    """(n, subrays, 3) unit sensor-frame directions of the sub-rays of some (default all) pixels."""
+    k = int(round(np.sqrt(subrays)))
+    tx, ty = subray_tangents(pixels, fov_rad, k, pixel_index)
+    return unit_directions(tx, ty).reshape(len(tx), k * k, 3)
 
 
 def unit_directions(tx, ty) -> np.ndarray:
@@ -146,14 +158,11 @@ class RayGrid:
 
 
 def ray_grid(pixels: int, fov_rad: float, subrays: int) -> RayGrid:
-    k = int(round(np.sqrt(subrays)))
-    tx, ty = pixel_offsets(pixels, fov_rad, k)
-    dirs = unit_directions(tx, ty).reshape(pixels * pixels, k * k, 3)
-    cx, cy = pixel_offsets(pixels, fov_rad, 1)
-    centre = unit_directions(cx[..., 0, 0], cy[..., 0, 0]).reshape(pixels * pixels, 3)
+    dirs = subray_directions(pixels, fov_rad, subrays)
+    centre = subray_directions(pixels, fov_rad, 1)[:, 0]
     for a in (dirs, centre):
         a.setflags(write=False)
-    return RayGrid(pixels, k * k, fov_rad / pixels, dirs, centre)
+    return RayGrid(pixels, dirs.shape[1], fov_rad / pixels, dirs, centre)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -214,41 +223,96 @@ class RayCaster:
 
 
 @dataclass(frozen=True)
-class Hits:
-    """First hits of every sub-ray.
+class HitBlock:
+    """First hits of K sub-rays in each of n pixels.
 
     Attributes
     ----------
-    range_m : (n_pix, K) float64 -- lidar-to-hit distance, inf where the sub-ray misses
-    cos_theta : (n_pix, K) float64 -- abs(cos) of the incidence angle towards the lidar, 0 on a miss
-    face : (n_pix, K) int32 -- facet id, -1 on a miss
-    depth_m : (n_pix, K) float64 -- boresight depth z of the hit in the sensor frame (for the
-        paper's one-way-delay form of Eq. 29)
+    pixel : (n,) int64 -- flat pixel indices
+    directions : (n, K, 3) float64 -- sub-ray unit directions, sensor frame
+    range_m : (n, K) float64 -- lidar-to-hit distance, inf where the sub-ray misses
+    cos_theta : (n, K) float64 -- abs(cos) of the incidence angle towards the lidar, 0 on a miss
+    face : (n, K) int32 -- facet id, -1 on a miss
+    depth_m : (n, K) float64 -- boresight depth z of the hit, sensor frame (for the paper's
+        one-way-delay form of Eq. 29)
     """
 
+    pixel: np.ndarray
+    directions: np.ndarray
     range_m: np.ndarray
     cos_theta: np.ndarray
     face: np.ndarray
     depth_m: np.ndarray
+
+    @property
+    def subrays(self) -> int:
+        return self.directions.shape[1]
+
+
+@dataclass(frozen=True)
+class Hits:
+    """First hits of the whole array: the base sampling of every pixel and, if adaptive
+    refinement is on, a denser sampling of the mixed pixels that replaces theirs.
+
+    ``range_m``, ``cos_theta``, ``face``, ``depth_m`` are the base block's (n_pix, K) arrays.
+    """
+
+    base: HitBlock
+    refined: HitBlock | None
     pose: PoseInSensor
+
+    @property
+    def range_m(self) -> np.ndarray:
+        return self.base.range_m
+
+    @property
+    def cos_theta(self) -> np.ndarray:
+        return self.base.cos_theta
+
+    @property
+    def face(self) -> np.ndarray:
+        return self.base.face
+
+    @property
+    def depth_m(self) -> np.ndarray:
+        return self.base.depth_m
+
+    @property
+    def refined_pixels(self) -> np.ndarray:
+        return self.refined.pixel if self.refined is not None else np.zeros(0, np.int64)
+
+    def blocks(self) -> list[HitBlock]:
+        """Disjoint blocks covering every pixel: the base minus the refined pixels, the refined."""
+        if self.refined is None:
+            return [self.base]
+        keep = np.ones(len(self.base.pixel), bool)
+        keep[self.refined.pixel] = False
+        b = self.base
+        base = HitBlock(
+            *(x[keep] for x in (b.pixel, b.directions, b.range_m, b.cos_theta, b.face, b.depth_m))
+        )
+        return [base, self.refined]
 
     @property
     def hit_pixel_mask(self) -> np.ndarray:
         """(n_pix,) bool: the pixel sees the target with at least one sub-ray."""
-        return (self.face >= 0).any(axis=1)
+        mask = (self.base.face >= 0).any(axis=1)
+        if self.refined is not None:
+            mask[self.refined.pixel] = (self.refined.face >= 0).any(axis=1)
+        return mask
 
     @property
     def visible_faces(self) -> np.ndarray:
         """Sorted unique ids of the facets the lidar sees this frame."""
-        f = self.face[self.face >= 0]
-        return np.unique(f)
+        faces = [b.face[b.face >= 0] for b in self.blocks()]
+        return np.unique(np.concatenate(faces))
 
 
-def cast(caster: RayCaster, rays: RayGrid, pose: PoseInSensor) -> Hits:
-    """First hit of every sub-ray of the array for the target in ``pose``."""
+def cast_block(caster: RayCaster, pixel, directions, pose: PoseInSensor) -> HitBlock:
+    """First hits of the sub-rays ``directions`` (n, K, 3, sensor frame) of pixels ``pixel``."""
     rot_t = pose.rotation.T  # sensor -> target
     origin_t = -rot_t @ pose.translation_m
-    dirs_s = rays.directions.reshape(-1, 3)
+    dirs_s = directions.reshape(-1, 3)
     dirs_t = dirs_s @ pose.rotation  # (R^T d) for each row
     start = max(0.0, float(np.linalg.norm(pose.translation_m)) - 1.05 * caster._radius)
     range_m, face = caster.first_hits(origin_t, dirs_t, start)
@@ -256,11 +320,83 @@ def cast(caster: RayCaster, rays: RayGrid, pose: PoseInSensor) -> Hits:
     cos_t = np.zeros_like(range_m)
     cos_t[hit] = np.abs(np.einsum("ij,ij->i", caster.facet_normals(face[hit]), dirs_t[hit]))
     depth = np.where(hit, range_m * dirs_s[:, 2], np.inf)
-    shape = rays.directions.shape[:2]
-    return Hits(
+    shape = directions.shape[:2]
+    return HitBlock(
+        np.asarray(pixel, dtype=np.int64),
+        directions,
         range_m.reshape(shape),
         cos_t.reshape(shape),
         face.reshape(shape),
         depth.reshape(shape),
-        pose,
     )
+
+
+def mixed_pixels(block: HitBlock, pixels: int, step_m: float) -> np.ndarray:
+    """Flat indices of the pixels a few sub-rays cannot represent.
+
+    A pixel is mixed when its sub-rays disagree (some hit, some miss, or their ranges leave a
+    plane fitted to them by more than ``step_m``: tilted planes pass, steps do not), when its hit
+    status differs from a 4-neighbour's (both sides of the silhouette are marked), or when the
+    mean-range image has a second difference above ``step_m`` at it (near zero on planes and
+    gently curved surfaces; a depth step marks the pixels on both sides of it).
+    """
+    hit = block.face >= 0
+    any_hit = hit.any(axis=1)
+    full = hit.all(axis=1)
+    mixed = any_hit & ~full
+    k = block.subrays
+    grad = None
+    if k > 1:  # least-squares plane r = a + b x + c y over the sub-pixel grid (x, y in sub-steps)
+        side = int(round(np.sqrt(k)))
+        g = np.arange(side) - (side - 1) / 2.0
+        x = np.tile(g, side)
+        y = np.repeat(g, side)
+        r = np.where(hit, block.range_m, 0.0)
+        a = r.mean(axis=1, keepdims=True)
+        b = (r * x).sum(axis=1, keepdims=True) / (x * x).sum()
+        c = (r * y).sum(axis=1, keepdims=True) / (y * y).sum()
+        residual = np.abs(r - a - b * x - c * y).max(axis=1)
+        mixed |= full & (residual > step_m)
+        # the plane's range change per pixel along rows (axis 0, y) and columns (axis 1, x)
+        grad = [np.where(full, v[:, 0] * side, np.nan).reshape(pixels, pixels) for v in (c, b)]
+    r_mean = np.where(
+        any_hit,
+        np.where(hit, block.range_m, 0.0).sum(axis=1) / np.maximum(hit.sum(axis=1), 1),
+        np.nan,
+    ).reshape(pixels, pixels)
+    seen = any_hit.reshape(pixels, pixels)
+    flag = mixed.reshape(pixels, pixels).copy()
+    for axis in (0, 1):
+        a_, b_ = [slice(None)] * 2, [slice(None)] * 2
+        a_[axis], b_[axis] = slice(None, -1), slice(1, None)
+        differ = seen[tuple(a_)] != seen[tuple(b_)]
+        flag[tuple(a_)] |= differ
+        flag[tuple(b_)] |= differ
+        lo, mid, hi = [slice(None)] * 2, [slice(None)] * 2, [slice(None)] * 2
+        lo[axis], mid[axis], hi[axis] = slice(None, -2), slice(1, -1), slice(2, None)
+        with np.errstate(invalid="ignore"):
+            second = np.abs(r_mean[tuple(lo)] - 2 * r_mean[tuple(mid)] + r_mean[tuple(hi)])
+            flag[tuple(mid)] |= second > step_m  # NaN (a missing neighbour) compares False
+            if grad is not None:  # a step inside a pixel: its own gradient is not its neighbours'
+                across = 0.5 * (r_mean[tuple(hi)] - r_mean[tuple(lo)])
+                flag[tuple(mid)] |= np.abs(grad[axis][tuple(mid)] - across) > step_m
+    return np.flatnonzero(flag)
+
+
+def cast(
+    caster: RayCaster,
+    rays: RayGrid,
+    pose: PoseInSensor,
+    fov_rad: float = 0.0,
+    refine_subrays: int = 0,
+    refine_step_m: float = 0.02,
+) -> Hits:
+    """First hit of every sub-ray of the array for the target in ``pose``; with
+    ``refine_subrays`` > the base count, the mixed pixels are cast again that densely."""
+    base = cast_block(caster, np.arange(rays.pixels**2), rays.directions, pose)
+    refined = None
+    if refine_subrays > rays.subrays:
+        which = mixed_pixels(base, rays.pixels, refine_step_m)
+        dirs = subray_directions(rays.pixels, fov_rad, refine_subrays, which)
+        refined = cast_block(caster, which, dirs, pose)
+    return Hits(base, refined, pose)

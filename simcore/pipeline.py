@@ -241,8 +241,13 @@ def stage_rays(scene: Scene) -> geometry.RayGrid:
 
 def stage_hits(scene: Scene, tgt: TargetStage, rays: geometry.RayGrid) -> geometry.Hits:
     pose = geometry.target_pose(scene.pose, tgt.model.mesh.extents, tgt.model.body_from_mesh)
-    hits = geometry.cast(tgt.caster, rays, pose)
-    _readonly(hits.range_m, hits.cos_theta, hits.face, hits.depth_m)
+    fid = scene.fidelity
+    hits = geometry.cast(
+        tgt.caster, rays, pose, scene.receive.fov_rad, fid.refine_subrays, fid.refine_step_m
+    )
+    for block in (hits.base, hits.refined):
+        if block is not None:
+            _readonly(block.range_m, block.cos_theta, block.face, block.depth_m)
     return hits
 
 
@@ -254,37 +259,70 @@ def stage_echo(scene: Scene, tgt: TargetStage, rays: geometry.RayGrid, hits: geo
         scene.laser.pulse_width_s, scene.detector.bandwidth_hz
     )
     t_d = timing.cfd_delay_s(shape, scene.timing.cfd_delay_s)
+    blocks = [_echo_block(scene, model, b, shape, dt, t_d) for b in hits.blocks()]
+    pixel = np.concatenate([b["pixel"] for b in blocks])
+    order = np.argsort(pixel, kind="stable")
+    k_max = max(b["weights"].shape[1] for b in blocks)
 
-    lit_gain = echo.illumination_gain(
-        rays.directions, scene.illumination_angle_rad, scene.transmit.illumination
+    def merged(name, pad_value=0.0):
+        parts = [b[name] for b in blocks]
+        if parts[0].ndim == 2:  # pad the sub-ray axis to the largest K (weight 0: no light)
+            parts = [
+                np.pad(p, ((0, 0), (0, k_max - p.shape[1])), constant_values=pad_value)
+                for p in parts
+            ]
+        return np.concatenate(parts)[order]
+
+    raw = scene.uses("unfiltered_peak")
+    feats = echo.EchoFeatures(
+        merged("peak"), merged("t_half"), merged("slope"), merged("peak_raw") if raw else None
     )
-    candidates = np.flatnonzero(hits.hit_pixel_mask & (lit_gain > 0).any(axis=1))
-    face = hits.face[candidates]
+    arrivals, weights = merged("arrivals"), merged("weights")
+    _readonly(arrivals, weights)
+    return EchoStage(
+        model,
+        shape,
+        dt,
+        t_d,
+        pixel[order],
+        arrivals,
+        weights,
+        feats,
+        merged("material_id"),
+        merged("facet_id"),
+    )
+
+
+def _echo_block(scene, model, block: geometry.HitBlock, shape, dt, t_d) -> dict[str, np.ndarray]:
+    """Echo features of one block of pixels sampled with the same number of sub-rays."""
+    lit_gain = echo.illumination_gain(
+        block.directions, scene.illumination_angle_rad, scene.transmit.illumination
+    )
+    face = block.face
     hit = face >= 0
     params = materials.parameter_table(materials.MATERIAL_NAMES)
     mat = np.where(hit, model.face_material_library[np.where(hit, face, 0)], -1)
     A, B, m, s = (params[np.maximum(mat, 0), j] for j in range(4))
-    rho = np.where(hit, materials.brdf(hits.cos_theta[candidates], A, B, m, s), 0.0)
+    rho = np.where(hit, materials.brdf(block.cos_theta, A, B, m, s), 0.0)
     weights = echo.element_weights(
-        hits.range_m[candidates],
-        hits.cos_theta[candidates],
+        block.range_m,
+        block.cos_theta,
         rho,
-        lit_gain[candidates],
+        lit_gain,
         aperture_area_m2=np.pi * scene.receive.aperture_diameter_m**2 / 4.0,
         eta_t=scene.transmit.transmittance,
         eta_r=scene.receive.transmittance,
         ifov_rad=scene.ifov_rad,
-        subrays=rays.subrays,
+        subrays=block.subrays,
         paper_4pi=scene.uses("eq30_4pi"),
     )
     keep = (weights > 0).any(axis=1)
-    pixel, weights, face, mat = candidates[keep], weights[keep], face[keep], mat[keep]
-    rng_m = hits.range_m[pixel]
+    weights, face, mat = weights[keep], face[keep], mat[keep]
     if scene.uses("eq29_one_way"):  # relief along the boresight, one way (the paper's print)
         distance = scene.pose.distance_m
-        arrivals = 2.0 * distance / C + (hits.depth_m[pixel] - distance) / C
+        arrivals = 2.0 * distance / C + (block.depth_m[keep] - distance) / C
     else:
-        arrivals = 2.0 * rng_m / C
+        arrivals = 2.0 * block.range_m[keep] / C
     arrivals = np.where(weights > 0, arrivals, 0.0)
     feats = echo.echo_features(
         shape,
@@ -296,20 +334,18 @@ def stage_echo(scene: Scene, tgt: TargetStage, rays: geometry.RayGrid, hits: geo
         raw_peak=scene.uses("unfiltered_peak"),
     )
     strongest = np.argmax(weights, axis=1)
-    rows = np.arange(len(pixel))
-    _readonly(pixel, arrivals, weights)
-    return EchoStage(
-        model,
-        shape,
-        dt,
-        t_d,
-        pixel,
-        arrivals,
-        weights,
-        feats,
-        mat[rows, strongest].astype(np.int32),
-        face[rows, strongest].astype(np.int32),
-    )
+    rows = np.arange(len(weights))
+    return {
+        "pixel": block.pixel[keep],
+        "arrivals": arrivals,
+        "weights": weights,
+        "peak": feats.peak_w_per_j,
+        "t_half": feats.t_half_s,
+        "slope": feats.cfd_slope_per_s,
+        "peak_raw": feats.peak_raw_w_per_j if feats.peak_raw_w_per_j is not None else None,
+        "material_id": mat[rows, strongest].astype(np.int32),
+        "facet_id": face[rows, strongest].astype(np.int32),
+    }
 
 
 def stage_receiver(scene: Scene, ech: EchoStage) -> ReceiverStage:
@@ -398,7 +434,12 @@ def _deps(scene: Scene) -> dict[str, tuple]:
     return {
         "target": (scene.target.mesh, scene.target.scale_m_per_unit, scene.target.material_map),
         "rays": (det.pixels, scene.receive.fov_rad, scene.fidelity.subrays),
-        "hits": (scene.pose,),
+        "hits": (
+            scene.pose,
+            scene.receive.fov_rad,
+            scene.fidelity.refine_subrays,
+            scene.fidelity.refine_step_m,
+        ),
         "echo": (
             lz.pulse_width_s,
             lz.divergence_rad,

@@ -166,6 +166,17 @@ class Fidelity:
     time_step_s: float = _f(
         0.0, "s", 0.0, 1e-7, "waveform time step; 0 = auto min(tau/10, 1/(20 B))"
     )
+    refine_subrays: int = _f(
+        0, "1", 0, 1024, "sub-rays for mixed pixels (edges, depth steps); 0 = no refinement"
+    )
+    refine_step_m: float = _f(
+        0.02,
+        "m",
+        0.0,
+        100.0,
+        "depth step (range second difference) that marks a mixed pixel",
+        lo_open=True,
+    )
     noise_model: str = _f(
         "statistical",
         "-",
@@ -190,9 +201,27 @@ PAPER_FORMS = (
 # The echo timing is refined on exact values, so the time step mostly matters for resolving close
 # double peaks; the sub-rays per pixel decide how well each pixel's depth profile is sampled.
 PRESETS: dict[str, dict[str, Any]] = {
-    "interactive": {"fidelity.subrays": 1, "fidelity.time_step_s": 0.0},
-    "balanced": {"fidelity.subrays": 4, "fidelity.time_step_s": 0.0},
-    "reference": {"fidelity.subrays": 64, "fidelity.time_step_s": 1e-10},
+    # one sub-ray per pixel; pixels that one ray cannot represent (silhouettes, depth steps)
+    # are re-cast with the reference's 64
+    "interactive": {
+        "fidelity.subrays": 1,
+        "fidelity.refine_subrays": 64,
+        "fidelity.refine_step_m": 0.05,
+        "fidelity.time_step_s": 0.0,
+    },
+    "balanced": {
+        "fidelity.subrays": 4,
+        "fidelity.refine_subrays": 64,
+        "fidelity.refine_step_m": 0.02,
+        "fidelity.time_step_s": 0.0,
+    },
+    # every pixel sampled by 8 x 8 sub-rays, a finer time grid
+    "reference": {
+        "fidelity.subrays": 64,
+        "fidelity.refine_subrays": 0,
+        "fidelity.refine_step_m": 0.02,
+        "fidelity.time_step_s": 1e-10,
+    },
 }
 
 
@@ -340,6 +369,13 @@ def validate(scene: Scene) -> None:
         raise SceneError(
             f"detector.bias_voltage_v = {d.bias_voltage_v:g} V must be below "
             f"detector.breakdown_voltage_v = {d.breakdown_voltage_v:g} V (Miller's law, Eq. 9)"
+        )
+    fid = scene.fidelity
+    kr = math.isqrt(fid.refine_subrays)
+    if fid.refine_subrays and (kr * kr != fid.refine_subrays or fid.refine_subrays < fid.subrays):
+        raise SceneError(
+            f"fidelity.refine_subrays = {fid.refine_subrays} must be 0 or a square number "
+            f"(4, 16, 64, ...) not below fidelity.subrays = {fid.subrays}"
         )
     k = math.isqrt(scene.fidelity.subrays)
     if k * k != scene.fidelity.subrays:

@@ -3,7 +3,7 @@
     lmapd simulate [SCENE.toml] [--set NAME=VALUE ...] --out cloud.ply
                    [--summary summary.json] [--waveforms waveforms.npz]
     lmapd keys [--markdown]
-    lmapd bench [--quick] [--json FILE]
+    lmapd bench [--quick] [--json FILE] [--tradeoff --out DIR]
     lmapd app [--host 127.0.0.1] [--port 8080] [--scene SCENE]
     lmapd flyaround [SCENE.toml] [--set NAME=VALUE ...] --out DIR [--interval-s 300]
                     [--duration-s SECONDS] [--j2]
@@ -104,6 +104,12 @@ def cmd_keys(args) -> int:
 
 
 def cmd_bench(args) -> int:
+    if args.tradeoff:
+        if not args.out:
+            raise CliError("--tradeoff needs --out DIR")
+        from . import tradeoff  # noqa: PLC0415
+
+        return tradeoff.main(args.out, quick=args.quick)
     from . import bench  # noqa: PLC0415
 
     return bench.main(quick=args.quick, json_path=args.json)
@@ -150,6 +156,12 @@ def build_parser() -> argparse.ArgumentParser:
     bench = sub.add_parser("bench", help="median stage timings on the MRO (README table)")
     bench.add_argument("--quick", action="store_true", help="fewer repeats and sizes")
     bench.add_argument("--json", help="also write the figures to this JSON file")
+    bench.add_argument(
+        "--tradeoff",
+        action="store_true",
+        help="each preset's time against its error relative to reference (needs --out)",
+    )
+    bench.add_argument("--out", help="folder for tradeoff.json and tradeoff.png")
     bench.set_defaults(func=cmd_bench)
 
     app = sub.add_parser("app", help="serve the browser app (127.0.0.1:8080)")

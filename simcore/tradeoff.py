@@ -1,0 +1,201 @@
+"""``lmapd bench --tradeoff``: each fidelity preset's time against its error relative to
+``reference``, on the paper scene at several attitudes (oblique solar panels included).
+
+Errors compare noise-free quantities, so that they measure the model and not the random draw:
+range RMSE over the pixels lit in both runs (the Eq. 31 range, which carries the waveform bias),
+the expected point count (sum of P_d), and the relative L2 error of the band-limited waveforms.
+"""
+
+from __future__ import annotations
+
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from .echo import echo_waveform
+from .io import atomic_path, write_json
+from .pipeline import Pipeline, Result
+from .scene import PRESETS, load_scene, with_overrides
+
+ATTITUDES = (
+    {"pitch_deg": 0.0, "azimuth_deg": 0.0},  # the paper's front view
+    {"pitch_deg": 30.0, "azimuth_deg": 0.0},
+    {"pitch_deg": 0.0, "azimuth_deg": 60.0},  # solar panels at 60 deg incidence
+    {"pitch_deg": 45.0, "azimuth_deg": 30.0},
+    {"pitch_deg": 70.0, "azimuth_deg": 0.0},  # panels near grazing
+)
+WAVEFORM_SAMPLE = 300  # pixels per attitude for the waveform error
+
+
+def _timed(pipe: Pipeline, scene, repeats: int) -> tuple[Result, float]:
+    """Median wall time of a full frame (the pose stages re-run each time) [s]."""
+    times = []
+    result = None
+    for i in range(repeats):
+        nudged = with_overrides(scene, {"pose.roll_deg": 1e-6 * (i % 2)})
+        t0 = time.perf_counter()
+        result = pipe.run(nudged)
+        times.append(time.perf_counter() - t0)
+    return result, statistics.median(times)
+
+
+def waveform_l2_error(result: Result, reference: Result, pixels, rng) -> float:
+    """Relative L2 error of band-limited echoes of common pixels, on the reference's windows."""
+    sample = rng.choice(pixels, size=min(WAVEFORM_SAMPLE, len(pixels)), replace=False)
+    num = den = 0.0
+    for p in sample:
+        i, j = np.searchsorted(result.echo.pixel, p), np.searchsorted(reference.echo.pixel, p)
+        e, r = result.echo, reference.echo
+        t, _, y_ref = echo_waveform(r.shape, r.arrivals_s[j], r.weights[j], r.dt_s)
+        tau = t[:, None] - e.arrivals_s[i][None, :]
+        y = e.shape.filtered_at(tau) @ e.weights[i]
+        num += float(np.sum((y - y_ref) ** 2))
+        den += float(np.sum(y_ref**2))
+    return float(np.sqrt(num / den)) if den > 0 else 0.0
+
+
+def compare(result: Result, reference: Result, rng) -> dict:
+    common = np.intersect1d(result.echo.pixel, reference.echo.pixel)
+    i = np.searchsorted(result.echo.pixel, common)
+    j = np.searchsorted(reference.echo.pixel, common)
+    err = result.detection.range_true_m[i] - reference.detection.range_true_m[j]
+    n_ref = float(reference.detection.p_detect.sum())
+    n = float(result.detection.p_detect.sum())
+    return {
+        "range_rmse_m": float(np.sqrt(np.mean(err**2))) if len(err) else 0.0,
+        "range_p99_m": float(np.percentile(np.abs(err), 99)) if len(err) else 0.0,
+        "point_count_diff_pct": 100.0 * (n - n_ref) / n_ref if n_ref else 0.0,
+        "waveform_l2": waveform_l2_error(result, reference, common, rng),
+        "refined_pixels": int(len(result.hits.refined_pixels)),
+        "lit_pixels": int(len(result.echo.pixel)),
+    }
+
+
+def run(repeats: int = 3, pixels: int = 256) -> dict:
+    base = with_overrides(load_scene(), {"pixels": pixels})
+    pipe = Pipeline()
+    pipe.run(base)  # mesh and BVH, once
+    rng = np.random.default_rng(0)
+    rows = []
+    jobs = [
+        (att, preset)
+        for att in ATTITUDES
+        for preset in ("reference", *(p for p in PRESETS if p != "reference"))
+    ]
+    reference = None
+    for att, preset in tqdm(jobs, desc="trade-off", unit="run", file=sys.stderr):
+        scene = with_overrides(base, {"preset": preset, **att})
+        result, wall = _timed(pipe, scene, 1 if preset == "reference" else repeats)
+        if preset == "reference":
+            reference, ref_time = result, wall
+        row = {"preset": preset, **att, "time_s": wall, "speedup": ref_time / wall}
+        row.update(compare(result, reference, rng))
+        rows.append(row)
+    return {"pixels": pixels, "scene": "paper", "presets": PRESETS, "rows": rows}
+
+
+def summary(fig: dict) -> list[dict]:
+    """Per preset: median time and speed-up, worst range RMSE and count difference."""
+    out = []
+    for preset in dict.fromkeys(r["preset"] for r in fig["rows"]):
+        rows = [r for r in fig["rows"] if r["preset"] == preset]
+        out.append(
+            {
+                "preset": preset,
+                "time_s": statistics.median(r["time_s"] for r in rows),
+                "speedup_min": min(r["speedup"] for r in rows),
+                "speedup_median": statistics.median(r["speedup"] for r in rows),
+                "range_rmse_m_max": max(r["range_rmse_m"] for r in rows),
+                "range_rmse_m_median": statistics.median(r["range_rmse_m"] for r in rows),
+                "point_count_diff_pct_max": max(abs(r["point_count_diff_pct"]) for r in rows),
+                "waveform_l2_max": max(r["waveform_l2"] for r in rows),
+            }
+        )
+    return out
+
+
+def plot(fig: dict, path: Path) -> None:
+    import matplotlib  # noqa: PLC0415
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # noqa: PLC0415
+
+    colours = {"interactive": "tab:orange", "balanced": "tab:blue", "reference": "black"}
+    markers = "osD^v"
+    f, ax = plt.subplots(figsize=(10, 5))
+    for k, att in enumerate(ATTITUDES):
+        for r in (
+            r
+            for r in fig["rows"]
+            if r["pitch_deg"] == att["pitch_deg"]
+            and r["azimuth_deg"] == att["azimuth_deg"]
+            and r["preset"] != "reference"
+        ):
+            ax.scatter(
+                r["time_s"] * 1e3,
+                max(r["range_rmse_m"] * 1e3, 1e-3),
+                color=colours[r["preset"]],
+                marker=markers[k],
+                s=50,
+            )
+        ref = next(
+            r
+            for r in fig["rows"]
+            if r["preset"] == "reference"
+            and r["pitch_deg"] == att["pitch_deg"]
+            and r["azimuth_deg"] == att["azimuth_deg"]
+        )
+        ax.axvline(ref["time_s"] * 1e3, color="0.8", lw=0.8)
+    for preset, c in colours.items():
+        ax.scatter(
+            [],
+            [],
+            color=c,
+            label=preset if preset != "reference" else "reference time (grey lines)",
+        )
+    for k, att in enumerate(ATTITUDES):
+        ax.scatter(
+            [],
+            [],
+            color="0.4",
+            marker=markers[k],
+            label=f"pitch {att['pitch_deg']:.0f}, azimuth {att['azimuth_deg']:.0f} deg",
+        )
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    n = fig["pixels"]
+    ax.set_xlabel(f"wall time per frame [ms] ({n} x {n} pixels, 2-core machine)")
+    ax.set_ylabel("range RMSE against reference [mm]")
+    ax.set_title("Speed against accuracy: fidelity presets on the MRO (NASA/JPL-Caltech model)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.01, 0.5))
+    f.tight_layout()
+    with atomic_path(path) as tmp:
+        f.savefig(tmp, dpi=110, format="png")
+    plt.close(f)
+
+
+def main(out_dir: str, quick: bool = False) -> int:
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    fig = run(repeats=1 if quick else 3, pixels=128 if quick else 256)
+    fig["summary"] = summary(fig)
+    write_json(out / "tradeoff.json", fig)
+    plot(fig, out / "tradeoff.png")
+    print(
+        "| preset | median time (ms) | speed-up vs reference (min / median) | range RMSE max "
+        "(mm) | point count diff max (%) | waveform L2 max |"
+    )
+    print("|---|---|---|---|---|---|")
+    for s in fig["summary"]:
+        print(
+            f"| {s['preset']} | {s['time_s'] * 1e3:.0f} | {s['speedup_min']:.1f} / "
+            f"{s['speedup_median']:.1f} | {s['range_rmse_m_max'] * 1e3:.2f} | "
+            f"{s['point_count_diff_pct_max']:.2f} | {s['waveform_l2_max']:.4f} |"
+        )
+    print(f"-> {out / 'tradeoff.json'}, {out / 'tradeoff.png'}")
+    return 0

@@ -10,7 +10,7 @@ def test_a_run_compared_with_itself_has_no_error():
     res = simcore.simulate(pixels=32, preset="balanced")
     out = tradeoff.compare(res, res, np.random.default_rng(0))
     assert out["range_rmse_m"] == 0.0 and out["point_count_diff_pct"] == 0.0
-    assert out["waveform_l2"] == 0.0
+    assert out["waveform_l2"] < 1e-12  # the same echoes, summed in another order
 
 
 def test_one_sub_ray_without_refinement_is_further_from_the_reference_than_interactive():

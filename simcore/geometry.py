@@ -80,7 +80,8 @@ class PoseInSensor:
 
 
 def target_pose(pose: Pose, extents, body_from_mesh=None) -> PoseInSensor:
-    """The target's pose in the sensor frame, its origin on the boresight at ``distance_m``.
+    """The target's pose in the sensor frame: its origin at ``distance_m`` along the boresight,
+    moved sideways by ``offset_x_m``, ``offset_y_m`` (0: on the boresight).
 
     With no quaternion: R = Rz(roll) Rx(pitch) Ry(azimuth) R0, rotations about the sensor's own axes
     applied to the front view R0 (azimuth first, then pitch, then roll). With ``quaternion_wxyz``
@@ -96,7 +97,7 @@ def target_pose(pose: Pose, extents, body_from_mesh=None) -> PoseInSensor:
             @ rotation_y(np.radians(pose.azimuth_deg))
             @ front_view_rotation(extents)
         )
-    return PoseInSensor(rot, np.array([0.0, 0.0, pose.distance_m]))
+    return PoseInSensor(rot, np.array([pose.offset_x_m, pose.offset_y_m, pose.distance_m]))
 
 
 # ----------------------------------------------------------------------------------------------

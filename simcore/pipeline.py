@@ -23,6 +23,7 @@ from .target import TargetModel, load_target, with_materials
 
 C = sc.c
 STAGES = ("target", "rays", "hits", "echo", "receiver", "detection", "cloud")
+MAX_OUTLIERS = 5_000_000  # false alarms drawn per flash at most (a TNR near 0 gives ~640/pixel)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -400,6 +401,13 @@ def stage_detection(scene: Scene, ech: EchoStage, rx: ReceiverStage) -> Detectio
     else:
         n_false = detection.false_alarms_per_pixel(
             t.tnr, t.range_gate_m, scene.detector.bandwidth_hz
+        )
+    expected = n_false * scene.detector.pixels**2
+    if expected > MAX_OUTLIERS:
+        raise SceneError(
+            f"timing.tnr = {t.tnr:g} gives {expected:.3g} expected false alarms per flash over "
+            f"the {t.range_gate_m:g} m gate, more than the {MAX_OUTLIERS:,} this simulator draws; "
+            "raise the TNR or shorten timing.range_gate_m"
         )
     outliers = detection.draw_outliers(
         rng, scene.detector.pixels**2, n_false, scene.gate_center_m, t.range_gate_m

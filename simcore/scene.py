@@ -155,6 +155,8 @@ class Pose:
     azimuth_deg: float = _f(0.0, "deg", -360.0, 360.0, "rotation about the array's vertical axis")
     roll_deg: float = _f(0.0, "deg", -360.0, 360.0, "rotation about the boresight")
     distance_m: float = _f(500.0, "m", 0.0, 1e6, "lidar to target centre", lo_open=True)
+    offset_x_m: float = _f(0.0, "m", -1e6, 1e6, "target centre off the boresight, image right")
+    offset_y_m: float = _f(0.0, "m", -1e6, 1e6, "target centre off the boresight, image down")
     quaternion_wxyz: tuple[float, ...] = _f(
         (), "-", doc="if given: target-body to sensor rotation, replaces pitch/azimuth/roll"
     )

@@ -384,16 +384,6 @@ def stage_detection(scene: Scene, ech: EchoStage, rx: ReceiverStage) -> Detectio
     sigma = timing.range_sigma_m(s_cfd, timing.sigma_quantisation_m(t.resolution_s))
     r_true = timing.range_from_half_max_m(ech.features.t_half_s, ech.shape.t_half_s)
 
-    n = len(ech.pixel)
-    drawn = rng.random(n) < p_d
-    noise = rng.standard_normal(n)
-    with np.errstate(invalid="ignore"):
-        r_meas = r_true + np.where(drawn, sigma * noise, 0.0)
-    lo = max(0.0, scene.gate_center_m - t.range_gate_m / 2.0)
-    hi = scene.gate_center_m + t.range_gate_m / 2.0
-    detected = drawn & np.isfinite(r_meas) & (r_meas >= lo) & (r_meas <= hi)
-    r_meas = np.where(detected, r_meas, np.nan)
-
     if scene.uses("eq28_paper"):
         n_false = detection.false_alarms_per_pixel_paper(
             t.tnr, t.range_gate_m, scene.detector.bandwidth_hz
@@ -409,11 +399,33 @@ def stage_detection(scene: Scene, ech: EchoStage, rx: ReceiverStage) -> Detectio
             f"the {t.range_gate_m:g} m gate, more than the {MAX_OUTLIERS:,} this simulator draws; "
             "raise the TNR or shorten timing.range_gate_m"
         )
-    outliers = detection.draw_outliers(
-        rng, scene.detector.pixels**2, n_false, scene.gate_center_m, t.range_gate_m
-    )
+
+    n = len(ech.pixel)
+    if scene.fidelity.noise_model == "montecarlo":
+        # Section 5: noisy waveforms through the discriminator decide detections, ranges and
+        # false alarms; P_d and sigma above stay the statistical model's, for comparison
+        mc = _montecarlo().montecarlo_detection(rng, ech, rx.model, scene)
+        drawn, r_meas, outliers = mc.detected, mc.range_m, mc.outliers
+    else:  # Section 4: Eq. 27 draws the detection, Eq. 24 the range noise, Eq. 28 the outliers
+        drawn = rng.random(n) < p_d
+        noise = rng.standard_normal(n)
+        with np.errstate(invalid="ignore"):
+            r_meas = r_true + np.where(drawn, sigma * noise, 0.0)
+        outliers = detection.draw_outliers(
+            rng, scene.detector.pixels**2, n_false, scene.gate_center_m, t.range_gate_m
+        )
+    lo = max(0.0, scene.gate_center_m - t.range_gate_m / 2.0)
+    hi = scene.gate_center_m + t.range_gate_m / 2.0
+    detected = drawn & np.isfinite(r_meas) & (r_meas >= lo) & (r_meas <= hi)
+    r_meas = np.where(detected, r_meas, np.nan)
     _readonly(p_d, detected, r_true, sigma, r_meas)
     return DetectionStage(p_d, detected, r_true, sigma, r_meas, threshold, n_false, outliers)
+
+
+def _montecarlo():
+    from . import montecarlo  # noqa: PLC0415  (imported only when the MC model is asked for)
+
+    return montecarlo
 
 
 def stage_cloud(rays: geometry.RayGrid, ech: EchoStage, rx: ReceiverStage, det: DetectionStage):
@@ -455,7 +467,7 @@ def _deps(scene: Scene) -> dict[str, tuple]:
             scene.receive,
             scene.target.materials,
             det.bandwidth_hz,
-            scene.fidelity,
+            scene.fidelity.time_step_s,
             scene.timing.cfd_fraction,
             scene.timing.cfd_delay_s,
             forms("pulse_constant", "eq30_4pi", "eq29_one_way", "unfiltered_peak"),
@@ -469,6 +481,7 @@ def _deps(scene: Scene) -> dict[str, tuple]:
         ),
         "detection": (
             scene.timing,
+            scene.fidelity.noise_model,
             scene.seed,
             scene.gate_center_m,
             forms("eq25_risetime", "eq27_paper", "eq28_paper"),

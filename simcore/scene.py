@@ -182,8 +182,9 @@ class Fidelity:
     noise_model: str = _f(
         "statistical",
         "-",
-        doc="noise model: statistical (PHYSICS.md Section 4)",
-        choices=("statistical",),
+        doc="statistical (Section 4: Eqs. 27-28 drawn) or montecarlo (Section 5: noisy "
+        "waveforms through the discriminator)",
+        choices=("statistical", "montecarlo"),
     )
 
 

@@ -114,3 +114,17 @@ def test_any_valid_scene_gives_finite_points_inside_the_range_gate(
     for key in ("snr_median", "range_sigma_m_median", "p_detect_mean"):
         assert s[key] is None or np.isfinite(s[key])
     assert np.all(np.isfinite(res.receiver.snr)) and np.all(res.detection.p_detect >= 0)
+
+
+def test_the_monte_carlo_noise_model_runs_in_the_pipeline_and_agrees_with_eq_27():
+    scene = simcore.with_overrides(simcore.load_scene(), {"pixels": 48})
+    stat = PIPE.run(scene)
+    mc = PIPE.run(simcore.with_overrides(scene, {"fidelity.noise_model": "montecarlo"}))
+    assert mc.timings_s["echo"] == 0.0  # switching the noise model re-runs detection only
+    assert np.all(np.isfinite(mc.points))
+    n = len(mc.echo.pixel)
+    expected = stat.detection.p_detect.sum()
+    spread = 5 * np.sqrt(np.sum(stat.detection.p_detect * (1 - stat.detection.p_detect))) + 0.02 * n
+    assert abs(mc.detection.detected.sum() - expected) <= spread  # Eq. 27 is single-look: 2 %
+    r = mc.attributes["range_m"]
+    assert np.all((r >= 0) & (r <= 1000.0))

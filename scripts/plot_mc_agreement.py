@@ -1,0 +1,280 @@
+"""Statistical model (Eqs. 24-28, ours) against the waveform Monte Carlo (PHYSICS.md section 5).
+
+Writes docs/img/mc_agreement.png with three panels -- P_d vs TNR for several SNR (Eq. 27 curves,
+MC points with binomial error bars), false alarms per pixel per 1 km gate vs TNR (Rice, the
+paper's form, MC points with Poisson error bars) and range sigma vs SNR (Eq. 24 with Eq. 25 ours,
+the shot-aware CFD jitter, MC points) -- and prints the agreement figures.
+
+    .venv/bin/python scripts/plot_mc_agreement.py [--out docs/img/mc_agreement.png] [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import time
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from scipy import constants as sc  # noqa: E402
+
+import simcore  # noqa: E402
+from simcore import detection, echo, montecarlo, receiver, timing  # noqa: E402
+
+C = sc.c
+SCENE = simcore.Scene()
+RX = receiver.receiver_model(SCENE.detector, SCENE.amplifiers, SCENE.laser.wavelength_m)
+RX_THERMAL = dataclasses.replace(RX, excess_noise=1e-9)  # negligible signal shot noise
+TAU = SCENE.laser.pulse_width_s
+B = SCENE.detector.bandwidth_hz
+E = SCENE.laser.pulse_energy_j
+SHAPE = echo.pulse_shape(TAU, echo.A_FWHM, B)
+DT = echo.default_time_step_s(TAU, B)
+T_D = timing.cfd_delay_s(SHAPE)
+K_ATT = SCENE.timing.cfd_fraction
+T_T = SCENE.timing.resolution_s
+GATE_M = 1000.0
+
+
+def i_pk_for_snr(snr, rx):
+    """Band-limited peak current with SNR_na (Eq. 18) = snr [A]."""
+    a = rx.chain_noise_factor * 2 * sc.e * rx.bandwidth_hz * rx.gain * rx.excess_noise
+    b = rx.chain_noise_factor * (rx.dark_noise_a**2 + rx.thermal_noise_a**2)
+    snr = np.asarray(snr, dtype=np.float64)
+    return 0.5 * (snr**2 * a + np.sqrt(snr**4 * a**2 + 4 * snr**2 * b))
+
+
+def gate(rng, arrivals, weights, rx, tnr, gate_m, n_total=None, **kw):
+    n = len(arrivals)
+    return montecarlo.montecarlo_gate(
+        rng,
+        pixel=np.arange(n),
+        arrivals_s=arrivals,
+        weights_per_j=weights,
+        shape=SHAPE,
+        dt_s=DT,
+        receiver=rx,
+        pulse_energy_j=E,
+        n_pixels_total=n if n_total is None else n_total,
+        gate_center_m=500.0,
+        gate_m=gate_m,
+        tnr=tnr,
+        t_d_s=T_D,
+        k_att=K_ATT,
+        resolution_s=kw.pop("resolution_s", T_T),
+        **kw,
+    )
+
+
+def single_surface(snrs, n_each, rng, rx):
+    i_pk = np.repeat(i_pk_for_snr(snrs, rx), n_each)
+    weights = (i_pk / (rx.responsivity_a_w * E * SHAPE.peak_w_per_j))[:, None]
+    arrivals = 2.0 * rng.uniform(498.0, 502.0, size=(len(i_pk), 1)) / C
+    return arrivals, weights, i_pk
+
+
+def pd_panel(ax, quick):
+    snrs = (3.0, 4.5, 6.0, 7.5)
+    tnrs = np.arange(2.0, 8.01, 1.0 if quick else 0.5)
+    n_each = 800 if quick else 3000
+    rng = np.random.default_rng(2024)
+    worst = (0.0, None)
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    p_mc = np.zeros((len(snrs), len(tnrs)))
+    for j, tnr in enumerate(tnrs):
+        arrivals, weights, _ = single_surface(snrs, n_each, rng, RX)
+        res = gate(rng, arrivals, weights, RX, tnr, 10.0)
+        p_mc[:, j] = res.detected.reshape(len(snrs), n_each).mean(axis=1)
+    tnr_fine = np.linspace(1.5, 8.5, 300)
+    for k, snr in enumerate(snrs):
+        i_pk = float(i_pk_for_snr(snr, RX))
+        p27 = detection.detection_probability(i_pk, tnr_fine * RX.sigma_n_a, RX.sigma_peak_a(i_pk))
+        ax.plot(tnr_fine, p27, color=colors[k], lw=1.5, label=f"Eq. 27, SNR {snr:g}")
+        err = np.sqrt(np.maximum(p_mc[k] * (1 - p_mc[k]), 1.0 / n_each) / n_each)
+        ax.errorbar(tnrs, p_mc[k], yerr=2 * err, fmt="o", ms=4, color=colors[k], capsize=2)
+        p27_pts = detection.detection_probability(i_pk, tnrs * RX.sigma_n_a, RX.sigma_peak_a(i_pk))
+        diff = np.abs(p_mc[k] - p27_pts)
+        for j in range(len(tnrs)):
+            if diff[j] > worst[0]:
+                worst = (float(diff[j]), (snr, float(tnrs[j]), p_mc[k, j], p27_pts[j]))
+    ax.plot([], [], "o", color="0.3", label="MC points (bars: 2 binomial sigma)")
+    ax.set_xlabel("TNR = V_T / sigma_n  [1]")
+    ax.set_ylabel("detection probability P_d  [1]")
+    ax.set_title(f"P_d: single-surface pixels, {n_each} per point")
+    ax.set_ylim(-0.03, 1.03)
+    ax.set_xlim(0.5, 8.7)  # room for the legend at the lower left
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="lower left")
+    return worst
+
+
+def false_alarm_panel(ax, quick):
+    tnrs = np.arange(2.0, 5.01, 0.5)
+    target = 150 if quick else 600
+    rng = np.random.default_rng(2025)
+    measured = []
+    for tnr in tnrs:
+        per_pixel = detection.false_alarms_per_pixel(tnr, GATE_M, B)
+        n_px = int(min(16384 if not quick else 4096, math.ceil(target / per_pixel)))
+        empty = np.zeros((0, 1))
+        res = gate(rng, empty, empty, RX, tnr, GATE_M, n_total=n_px)
+        measured.append((res.n_false_alarms, n_px))
+    counts = np.array([m[0] for m in measured], dtype=float)
+    n_px = np.array([m[1] for m in measured], dtype=float)
+    tnr_fine = np.linspace(1.5, 8.0, 300)
+    rice = detection.false_alarms_per_pixel(tnr_fine, GATE_M, B)
+    paper_b = detection.false_alarms_per_pixel_paper(tnr_fine, GATE_M, B)
+    paper_12 = detection.false_alarms_per_pixel_paper(tnr_fine, GATE_M, 12e6)
+    ax.semilogy(tnr_fine, rice, lw=1.8, label="Eq. 28 ours (Rice)")
+    ax.semilogy(tnr_fine, paper_b, "--", lw=1.5, label="Eq. 28 paper, df = B = 120 MHz")
+    ax.semilogy(tnr_fine, paper_12, ":", lw=1.5, label="Eq. 28 paper, df = 12 MHz (Fig. 9)")
+    ax.errorbar(
+        tnrs,
+        counts / n_px,
+        yerr=2 * np.sqrt(np.maximum(counts, 1.0)) / n_px,
+        fmt="o",
+        ms=5,
+        color="k",
+        capsize=2,
+        label="MC, multi-stop (2 Poisson sigma)",
+    )
+    ax.set_xlabel("TNR = V_T / sigma_n  [1]")
+    ax.set_ylabel("false alarms per pixel per 1 km gate  [1]")
+    ax.set_title("False alarms: noise-only pixels, 1 km gate")
+    ax.set_ylim(1e-7, 300)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8, loc="upper right")
+    rice_pts = detection.false_alarms_per_pixel(tnrs, GATE_M, B)
+    paper_pts = detection.false_alarms_per_pixel_paper(tnrs, GATE_M, B)
+    paper12_pts = detection.false_alarms_per_pixel_paper(tnrs, GATE_M, 12e6)
+    return tnrs, counts, n_px * rice_pts, n_px * paper_pts, n_px * paper12_pts
+
+
+def robust_sigma(x):
+    x = x[np.isfinite(x)]
+    return 1.4826 * np.median(np.abs(x - np.median(x))), len(x)
+
+
+def eq24_sigma_m(rx, i_pk):
+    slope = echo.echo_features(
+        SHAPE, np.zeros((1, 1)), np.ones((1, 1)), DT, T_D, K_ATT
+    ).cfd_slope_per_s[0]
+    s25 = timing.sigma_cfd_m(rx.snr(i_pk), slope, K_ATT, T_D, SHAPE.sigma_h_s)
+    return timing.range_sigma_m(s25, timing.sigma_quantisation_m(T_T))
+
+
+def sigma_panel(ax, quick):
+    snrs = np.array([4.0, 5.0, 7.0, 10.0, 15.0, 20.0, 30.0, 50.0, 100.0])
+    n_each = 1000 if quick else 4000
+    out = {}
+    for name, rx in (("default", RX), ("thermal", RX_THERMAL)):
+        rng = np.random.default_rng(2026)
+        arrivals, weights, i_pk = single_surface(snrs, n_each, rng, rx)
+        noisy = gate(rng, arrivals, weights, rx, 3.0, 10.0)
+        clean = gate(rng, arrivals, weights, rx, 3.0, 10.0, noise=False, resolution_s=0.0)
+        err = (noisy.range_m - clean.range_m).reshape(len(snrs), n_each)
+        sig = np.array([robust_sigma(e) for e in err])
+        i_pk = i_pk.reshape(len(snrs), n_each)[:, 0]
+        out[name] = (sig[:, 0], sig[:, 1], i_pk)
+    snr_fine = np.geomspace(3.0, 150.0, 60)
+    i_fine = i_pk_for_snr(snr_fine, RX)
+    eq24 = np.array([eq24_sigma_m(RX, i) for i in i_fine])
+    sigma_t = timing.sigma_quantisation_m(T_T)
+    aware = np.array(
+        [
+            np.hypot(montecarlo.cfd_sigma_shot_aware_m(SHAPE, RX, i, T_D, K_ATT), sigma_t)
+            for i in i_fine
+        ]
+    )
+    ax.loglog(snr_fine, 1e3 * eq24, lw=1.8, color="C0", label="Eq. 24 (Eq. 25 ours + Eq. 26)")
+    ax.loglog(
+        snr_fine,
+        1e3 * aware,
+        "--",
+        lw=1.5,
+        color="C3",
+        label="CFD jitter, shot noise in time (default rx)",
+    )
+    ax.axhline(1e3 * sigma_t, color="0.5", lw=0.8, ls=":", label="Eq. 26 sigma_t (100 ps)")
+    for name, color, label in (
+        ("default", "C3", "MC, default receiver (shot noise)"),
+        ("thermal", "C0", "MC, thermal-limited receiver"),
+    ):
+        sig, n, _ = out[name]
+        ax.errorbar(
+            snrs,
+            1e3 * sig,
+            yerr=2e3 * 1.1664 * sig / np.sqrt(n),
+            fmt="o" if name == "default" else "s",
+            mfc="none" if name == "thermal" else color,
+            ms=5,
+            color=color,
+            capsize=2,
+            label=label,
+        )
+    ax.set_xlabel("SNR_na (Eq. 18)  [1]")
+    ax.set_ylabel("range sigma (robust, 1.4826 MAD)  [mm]")
+    ax.set_title(f"Range noise at TNR 3, {n_each} pixels per point")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8, loc="upper right")
+    ratios = {}
+    for name, rx in (("default", RX), ("thermal", RX_THERMAL)):
+        sig, n, i_pk = out[name]
+        ratios[name] = sig / np.array([eq24_sigma_m(rx, i) for i in i_pk])
+    aware_pts = np.array(
+        [
+            np.hypot(montecarlo.cfd_sigma_shot_aware_m(SHAPE, RX, i, T_D, K_ATT), sigma_t)
+            for i in out["default"][2]
+        ]
+    )
+    ratios["default_vs_shot_aware"] = out["default"][0] / aware_pts
+    return snrs, ratios
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", default="docs/img/mc_agreement.png")
+    parser.add_argument("--quick", action="store_true", help="fewer trials (a draft)")
+    args = parser.parse_args()
+    t0 = time.perf_counter()
+    fig, axes = plt.subplots(1, 3, figsize=(18, 5.6))
+    worst = pd_panel(axes[0], args.quick)
+    tnrs, counts, rice, paper, paper12 = false_alarm_panel(axes[1], args.quick)
+    snrs, ratios = sigma_panel(axes[2], args.quick)
+    fig.suptitle(
+        "Statistical model (lines) vs waveform Monte Carlo (points): 5 ns pulse, B = 120 MHz, "
+        "dt = 0.42 ns, CFD k = 0.5, t_d = 2.24 ns, T_t = 100 ps",
+        fontsize=11,
+    )
+    fig.tight_layout()
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+
+    snr, tnr, p_mc, p_27 = worst[1]
+    print(
+        f"P_d: max |MC - Eq. 27| = {worst[0]:.3f} at SNR {snr:g}, TNR {tnr:g} "
+        f"(MC {p_mc:.3f}, Eq. 27 {p_27:.3f})"
+    )
+    print("false alarms per gate, TNR: MC count, MC/Rice, MC/paper(df=B), MC/paper(df=12 MHz)")
+    for u, n, r, p, p12 in zip(tnrs, counts, rice, paper, paper12, strict=True):
+        print(
+            f"  {u:4.1f}: {int(n):6d}  {n / r:5.3f} +- {np.sqrt(n) / r:5.3f}  "
+            f"{n / p:5.2f}  {n / p12:6.1f}"
+        )
+    print("range sigma, SNR: MC/Eq.24 (default), MC/shot-aware (default), MC/Eq.24 (thermal)")
+    for k, s in enumerate(snrs):
+        print(
+            f"  {s:5.0f}: {ratios['default'][k]:.3f}  "
+            f"{ratios['default_vs_shot_aware'][k]:.3f}  {ratios['thermal'][k]:.3f}"
+        )
+    print(f"wrote {out} in {time.perf_counter() - t0:.1f} s")
+
+
+if __name__ == "__main__":
+    main()

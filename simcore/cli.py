@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from pathlib import Path
 
@@ -185,6 +186,15 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("lmapd: interrupted", file=sys.stderr)
         return 130
+    except Exception as exc:  # a bug, not the user's input: one line, the trace on request
+        if os.environ.get("LMAPD_DEBUG"):
+            raise
+        print(
+            f"lmapd: internal error: {type(exc).__name__}: {exc} (a bug: please report it; "
+            "LMAPD_DEBUG=1 shows the traceback)",
+            file=sys.stderr,
+        )
+        return 1
 
 
 if __name__ == "__main__":

@@ -19,6 +19,7 @@ C = sc.c  # speed of light [m/s] (exact)
 K_B = sc.k  # Boltzmann constant [J/K] (exact)
 
 PAPER_QUANTUM_EFFICIENCY = 0.6  # the paper's "about 0.6 for Si"
+MAX_GAIN = 1e6  # refused above: far beyond any linear-mode APD (Si 20-400, Table 2)
 
 
 def unity_gain_responsivity_a_w(quantum_efficiency: float, wavelength_m: float) -> float:
@@ -111,6 +112,12 @@ def receiver_model(
     else:
         gain = miller_gain(
             detector.bias_voltage_v, detector.breakdown_voltage_v, detector.miller_exponent
+        )
+    if not gain <= MAX_GAIN:
+        raise SceneError(
+            f"the APD gain this detector section implies, M = {gain:.3g} (detector.gain_from = "
+            f"{detector.gain_from}), is above {MAX_GAIN:g}: no linear-mode APD works there; check "
+            "detector.responsivity_a_w, quantum_efficiency or bias_voltage_v"
         )
     f = excess_noise_factor(gain, detector.excess_noise_k)
     b = detector.bandwidth_hz

@@ -409,7 +409,9 @@ def _coerce(key: str, f: dataclasses.Field, value):
         if f.name == "materials":
             if isinstance(value, dict):
                 return tuple(sorted((str(k), str(v)) for k, v in value.items()))
-            if isinstance(value, (list, tuple)):
+            if isinstance(value, (list, tuple)) and all(
+                isinstance(p, (list, tuple)) and len(p) == 2 for p in value
+            ):
                 return tuple((str(k), str(v)) for k, v in value)
             raise SceneError(f"{key}: expected a table part = material, got {value!r}")
         if isinstance(value, (int, float, str)) and not isinstance(value, bool):
@@ -480,7 +482,7 @@ def with_overrides(scene: Scene, overrides: dict[str, Any] | None = None, **quic
         return scene
     preset = items.get("preset")
     if preset:
-        if preset not in PRESETS:
+        if not isinstance(preset, str) or preset not in PRESETS:
             raise SceneError(f"preset = {preset!r} is not valid; choose from {', '.join(PRESETS)}")
         items = {**PRESETS[preset], **items}
     top: dict[str, Any] = {}

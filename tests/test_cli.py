@@ -123,3 +123,16 @@ def test_keys_lists_every_key(capsys):
     assert cli.main(["keys", "--markdown"]) == 0
     out = capsys.readouterr().out
     assert "`laser.pulse_energy_j` | J |" in out and "`detector.pixels` | px |" in out
+
+
+def test_an_internal_error_is_one_line_unless_debugging(monkeypatch, tmp_path, capsys):
+    def broken(*args, **kwargs):
+        raise RuntimeError("boom")
+
+    monkeypatch.setattr("simcore.pipeline.Pipeline.run", broken)
+    assert cli.main(["simulate", "--set", "pixels=8", "--out", str(tmp_path / "c.ply")]) == 1
+    err = capsys.readouterr().err
+    assert "internal error: RuntimeError: boom" in err and "Traceback" not in err
+    monkeypatch.setenv("LMAPD_DEBUG", "1")
+    with pytest.raises(RuntimeError, match="boom"):
+        cli.main(["simulate", "--set", "pixels=8", "--out", str(tmp_path / "c.ply")])

@@ -7,6 +7,7 @@
     lmapd app [--host 127.0.0.1] [--port 8080] [--scene SCENE]
     lmapd flyaround [SCENE.toml] [--set NAME=VALUE ...] --out DIR [--interval-s 300]
                     [--duration-s SECONDS] [--j2]
+    lmapd reproduce --out DIR [--quick] [--seed N]
 
 Errors in the user's input (unknown key, value out of range, missing or broken file) print one
 message naming what is wrong and exit with status 2; no output file is left half-written.
@@ -20,7 +21,7 @@ import os
 import sys
 from pathlib import Path
 
-from . import flyaround, io
+from . import flyaround, io, reproduce
 from .materials import MATERIAL_NAMES
 from .scene import (
     PRESETS,
@@ -172,6 +173,7 @@ def build_parser() -> argparse.ArgumentParser:
     app.set_defaults(func=cmd_app)
 
     flyaround.add_parser(sub)
+    reproduce.add_parser(sub)
     return parser
 
 

@@ -120,3 +120,15 @@ def test_cfd_slope_of_a_single_pulse_is_the_half_max_slope():
         2 * h
     )
     assert feats.cfd_slope_per_s[0] == pytest.approx(slope / shape.peak_w_per_j, rel=1e-3)
+
+
+def test_paper_eq25_with_the_band_limited_rise_time_is_24x_ours_even_with_c_over_2():
+    """PHYSICS.md: the paper's form is 2.4x too pessimistic even with c/2 (so 4.8x with its c)."""
+    shape = echo.pulse_shape(TAU, echo.A_FWHM, B)
+    t_d = timing.cfd_delay_s(shape)
+    dt = echo.default_time_step_s(TAU, B)
+    feats = echo.echo_features(shape, np.array([[3e-6]]), np.array([[1.0]]), dt, t_d, 0.5)
+    ours = timing.sigma_cfd_m(10.0, feats.cfd_slope_per_s[0], 0.5, t_d, shape.sigma_h_s)
+    paper = timing.sigma_cfd_paper_m(10.0, 0.5, timing.rise_time_10_90_s(shape))
+    assert timing.rise_time_10_90_s(shape) == pytest.approx(2.76e-9, abs=0.01e-9)
+    assert paper / 2 / ours == pytest.approx(2.4, abs=0.05)

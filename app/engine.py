@@ -1,0 +1,137 @@
+"""The engine: simcore's Pipeline plus the view payloads of each result, run in the worker thread.
+
+One Engine per app; ``compute`` is only ever called from the runner's single worker thread (the
+Pipeline is not thread-safe). The target is loaded once up front for the page (its parts name the
+material drop-downs and its mesh is sent to the 3D view once).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+import simcore
+from app.logic import views
+from app.runner import StaleRequest
+
+
+@dataclass(frozen=True)
+class Request:
+    """What one frame needs: the scene and how to show it."""
+
+    scene: simcore.Scene
+    color_by: str = "range"
+    image_kind: str = "range"
+    selection: tuple[tuple[int, int], ...] = ()
+    selection_pixels: int = 0  # array size the selection refers to (0: none yet)
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One simulated flash and everything the views draw from it (built in the worker)."""
+
+    result: simcore.Result
+    summary: dict
+    cloud: dict
+    frustum: dict
+    faces_key: tuple
+    seen_facets: dict
+    legend: list[dict]
+    image: dict
+    selection: list[list[int]]
+    waveforms: dict
+    snr_histogram: dict
+    stats: list[dict]
+    simulate_s: float
+    views_s: float
+    timings_s: dict[str, float] = field(default_factory=dict)
+    request: Request | None = None
+
+
+class Engine:
+    """Owns the Pipeline (worker thread only) and the target's static display data."""
+
+    def __init__(self, scene: simcore.Scene, model: simcore.TargetModel | None = None):
+        """``model``: the scene's target if already loaded (else it is loaded here)."""
+        self.model = model if model is not None else simcore.load_target(scene.target)
+        self.frame = views.display_frame(self.model)
+        self.pipeline = simcore.Pipeline()
+        self.vertices_d = self.frame.from_target(self.model.mesh.vertices)  # display frame
+        # key, seen-facets mesh, legend, and the hits they came from (kept alive: id() unique)
+        self._facets: tuple | None = None
+
+    def target_geometry(self) -> dict:
+        return views.target_geometry(self.model, self.frame)
+
+    def home_camera(self) -> dict:
+        return views.home_camera(self.frame.radius_m)
+
+    def compute(self, request: Request, stale: Callable[[], bool] = lambda: False) -> Frame:
+        """Simulate ``request.scene`` and build every view's payload (runs in the worker).
+
+        Raises StaleRequest instead of building the views if ``stale()`` says a newer request
+        has arrived meanwhile.
+        """
+        t0 = time.perf_counter()
+        result = self.pipeline.run(request.scene)
+        if stale():
+            raise StaleRequest
+        t1 = time.perf_counter()
+        faces_key, seen_facets, legend = self._facets_payload(result)
+        selection = self.selection_for(result, request)
+        summary = result.summary()
+        frame = Frame(
+            result=result,
+            summary=summary,
+            cloud=views.cloud_view(result, self.frame, request.color_by),
+            frustum=views.frustum_mesh(result, self.frame),
+            faces_key=faces_key,
+            seen_facets=seen_facets,
+            legend=legend,
+            image=views.array_image(result, request.image_kind),
+            selection=selection,
+            waveforms=views.waveform_figure(result, selection),
+            snr_histogram=views.snr_histogram(result),
+            stats=views.stats_rows(summary),
+            simulate_s=t1 - t0,
+            views_s=time.perf_counter() - t1,
+            timings_s=dict(result.timings_s),
+            request=request,
+        )
+        return frame
+
+    def _facets_payload(self, result: simcore.Result) -> tuple[tuple, dict, list[dict]]:
+        """The seen facets' mesh (rebuilt only when the hits or the materials changed) and the
+        material legend."""
+        key = (id(result.hits), result.target.part_materials)
+        if self._facets is not None and self._facets[0] == key:
+            return key, self._facets[1], self._facets[2]
+        visible = result.visible_faces
+        mesh = views.seen_facets_mesh(result.target, self.vertices_d, visible)
+        legend = views.material_legend(result.target, visible)
+        self._facets = (key, mesh, legend, result.hits)
+        return key, mesh, legend
+
+    @staticmethod
+    def selection_for(result: simcore.Result, request: Request) -> list[list[int]]:
+        """The request's selected pixels on this result's array (rescaled if the array size
+        changed), or the default pixel when nothing is selected yet."""
+        n = result.pixels
+        if request.selection and request.selection_pixels:
+            chosen = views.rescale_selection(list(request.selection), request.selection_pixels, n)
+            return [p for p in chosen if 0 <= p[0] < n and 0 <= p[1] < n]
+        pixel = views.default_pixel(result)
+        return [pixel] if pixel is not None else []
+
+
+def selection_tuple(pixels) -> tuple[tuple[int, int], ...]:
+    """A hashable copy of a [[row, col], ...] selection; () for anything else (the state may
+    hold whatever a client sent)."""
+    try:
+        pairs = np.asarray(pixels, dtype=np.int64).reshape(-1, 2)
+    except (TypeError, ValueError, OverflowError):
+        return ()
+    return tuple((int(r), int(c)) for r, c in pairs)

@@ -1,0 +1,125 @@
+"""Run the real app server in a subprocess and drive it with Debian's headless Chromium: shared by
+the browser tests (tests/browser) and the benchmark (scripts/bench_app.py)."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.error
+import urllib.request
+from collections.abc import Iterator
+from pathlib import Path
+
+REPO_DIR = Path(__file__).resolve().parent.parent
+CHROMIUM_PATH = os.environ.get("LMAPD_CHROMIUM", "/usr/bin/chromium")
+# Debian's Chromium, headless, WebGL on SwiftShader (docs: STACK.md); never `playwright install`.
+CHROMIUM_ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--enable-unsafe-swiftshader",
+]
+
+
+def chromium_missing_message() -> str | None:
+    """None if Chromium is installed, else what to do about it."""
+    if Path(CHROMIUM_PATH).is_file() and os.access(CHROMIUM_PATH, os.X_OK):
+        return None
+    return (
+        f"Chromium not found at {CHROMIUM_PATH}: install Debian's chromium "
+        "(sudo apt-get install chromium; `make chromium` does it) or set LMAPD_CHROMIUM"
+    )
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind((host, 0))
+        return int(s.getsockname()[1])
+
+
+def _answers(url: str) -> bool:
+    try:
+        with urllib.request.urlopen(url, timeout=2) as response:
+            return response.status == 200
+    except (urllib.error.URLError, OSError):
+        return False
+
+
+@contextlib.contextmanager
+def app_server(
+    host: str = "127.0.0.1",
+    port: int | None = None,
+    scene: str | None = None,
+    timeout_s: float = 120.0,
+    log_path: Path | None = None,
+) -> Iterator[str]:
+    """Start ``python -m app`` on a free port, wait until it answers, yield its URL, stop it.
+
+    Raises RuntimeError (with the server's output) if it exits or does not answer in time.
+    """
+    port = port or free_port(host)
+    cmd = [sys.executable, "-m", "app", "--host", host, "--port", str(port)]
+    if scene:
+        cmd += ["--scene", scene]
+    url = f"http://{host}:{port}/"
+    log_file = open(log_path, "w+b") if log_path else tempfile.TemporaryFile()  # noqa: SIM115
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen(cmd, cwd=REPO_DIR, stdout=log_file, stderr=subprocess.STDOUT, env=env)
+    try:
+        deadline = time.monotonic() + timeout_s
+        while not _answers(url):
+            if proc.poll() is not None or time.monotonic() > deadline:
+                log_file.seek(0)
+                output = log_file.read().decode(errors="replace")[-4000:]
+                state = f"exited with {proc.returncode}" if proc.poll() is not None else "timed out"
+                raise RuntimeError(f"the app server {state} before answering {url}:\n{output}")
+            time.sleep(0.2)
+        yield url
+    finally:
+        if proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait(timeout=10)
+        log_file.close()
+
+
+# JavaScript helpers evaluated in the page (window.trame is trame's client API).
+JS_FRAMES = "() => (window.lmapdFrames || []).length"
+JS_STATE = "(name) => window.trame.state.get(name)"
+
+
+def wait_first_frame(page, timeout_s: float = 90.0) -> None:
+    """Wait until the page has drawn its first simulated frame."""
+    page.wait_for_function(JS_FRAMES + " > 0", timeout=timeout_s * 1000)
+
+
+def wait_settled(page, timeout_s: float = 60.0) -> None:
+    """Wait until the newest frame is drawn and nothing is computing."""
+    page.wait_for_function(
+        """() => {
+            const s = window.trame.state, frames = window.lmapdFrames || [];
+            return !s.get('busy') && frames.length > 0
+                && frames[frames.length - 1].key === s.get('frame_key');
+        }""",
+        timeout=timeout_s * 1000,
+    )
+
+
+def set_field(page, key: str, value: float) -> None:
+    """Type ``value`` into the number field of control ``key`` and commit it (Enter)."""
+    field = page.locator(f".value-{key} input")
+    field.fill(str(value))
+    field.press("Enter")

@@ -1,0 +1,305 @@
+"""The app's logic on the UI thread: state changes -> Scene -> runner; frames -> state.
+
+Every control change is sanitised (clamped or refused with a message), mapped to a Scene and
+submitted to the runner, which computes in its worker thread. Finished frames come back through
+the event loop; a frame is applied only if it is still the newest generation. Frames are also
+paced by the page: at most ``max_in_flight`` frames (default 2) are sent and not yet reported
+drawn by the page (reports older than ``ack_timeout_s`` are not waited for); further frames wait,
+only the newest of them kept, so a slow browser never builds a queue of stale frames.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import time
+from typing import Any
+
+import simcore
+from app.engine import Engine, Frame, Request, selection_tuple
+from app.logic import views
+from app.logic.scene_map import resolved_materials, scene_from_controls
+from app.runner import Outcome, Runner
+from app.state import (
+    MAX_SELECTED_PIXELS,
+    STATE_KEYS,
+    controls_from_scene,
+    sanitize_controls,
+)
+
+
+def _running_loop() -> asyncio.AbstractEventLoop | None:
+    try:
+        return asyncio.get_running_loop()
+    except RuntimeError:
+        return None
+
+
+class AppLogic:
+    """Binds the engine and the runner to a trame server's state and triggers."""
+
+    def __init__(
+        self,
+        server,
+        engine: Engine,
+        base_scene: simcore.Scene,
+        *,
+        debounce_s: float = 0.02,
+        flow_control: bool = True,
+        ack_timeout_s: float = 1.0,
+        max_in_flight: int = 2,
+    ):
+        self.server = server
+        self.state = server.state
+        self.engine = engine
+        self.base_scene = base_scene
+        self.flow_control = flow_control
+        self.ack_timeout_s = ack_timeout_s
+        self.max_in_flight = max_in_flight
+        self.initial_controls, startup_messages = controls_from_scene(
+            base_scene, resolved_materials(engine.model, base_scene)
+        )
+        self.controls = self.initial_controls
+        self.last_frame: Frame | None = None
+        self.n_frames_pushed = 0
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._applied_faces_key: tuple | None = None
+        self._inflight: dict[str, float] = {}  # frame key -> time pushed, not yet drawn
+        self._held: Outcome[Frame] | None = None
+        self._selection_pixels = 0
+        self.runner: Runner[Request, Frame] = Runner(
+            self._compute, self._deliver, debounce_s=debounce_s
+        )
+        self._init_state(startup_messages)
+        self.state.change(*STATE_KEYS)(self.on_controls_change)
+        server.trigger("pixel_click")(self.on_pixel_click)
+        server.trigger("frame_shown")(self.on_frame_shown)
+        server.trigger("reset_controls")(self.reset_controls)
+        server.controller.on_server_exited.add(lambda **_: self.runner.close())
+
+    # -- state ------------------------------------------------------------------------------------
+    def _init_state(self, startup_messages: list[str]) -> None:
+        model = self.engine.model
+        geometry = self.engine.target_geometry()
+        self.state.update(
+            {
+                **self.initial_controls.as_state(),
+                "scene_name": self.base_scene.name,
+                "target_name": model.name,
+                "credit": model.credit or "",
+                "part_names": list(model.part_names),
+                "material_items": [
+                    {"title": simcore.MATERIALS[n].label or n, "value": n}
+                    for n in simcore.MATERIAL_NAMES
+                ],
+                "target_points": geometry["points"],
+                "target_polys": geometry["polys"],
+                "seen_facets": None,
+                "home_camera": self.engine.home_camera(),
+                "frustum": None,
+                "footprint_text": "",
+                "cloud_points": None,
+                "cloud_outliers": None,
+                "cloud_colorbar": None,
+                "n_target_points": 0,
+                "n_outliers": 0,
+                "legend": [],
+                "array_image": {"src": "", "colorbar": None, "pixels": 0},
+                "selected_pixels": [],
+                "selection_colors": list(views.SELECTION_COLORS),
+                "waveforms": {"data": [], "layout": {}},
+                "snr_hist": {"data": [], "layout": {}},
+                "stats": [],
+                "stages": [],
+                "busy": True,
+                "error_message": "",
+                "input_message": " ".join(startup_messages),
+                "frame_key": "",
+                "frame_generation": 0,
+                "n_points": 0,
+            }
+        )
+
+    def on_controls_change(self, **_: Any) -> None:
+        """Any control changed: sanitise, write back corrections, submit the new scene."""
+        raw = {key: self.state[key] for key in STATE_KEYS}
+        controls, messages = sanitize_controls(raw, self.controls)
+        if messages:
+            self.state.input_message = "; ".join(messages)
+        fixed = {k: v for k, v in controls.as_state().items() if not _same(raw.get(k), v)}
+        if fixed:
+            self.state.update(fixed)  # the page shows the value actually used
+        self.controls = controls
+        try:
+            scene = scene_from_controls(self.base_scene, controls)
+        except ValueError as exc:  # SceneError: a value the core refuses
+            self.state.error_message = f"Invalid scene: {exc}"
+            return
+        self.submit(scene)
+
+    def submit(self, scene: simcore.Scene) -> int:
+        """Hand ``scene`` to the runner; the busy indicator shows until its frame is pushed."""
+        if self.server.running:  # the trame server's event loop (not, say, a test tool's)
+            self._loop = _running_loop() or self._loop
+        request = Request(
+            scene=scene,
+            color_by=self.controls.color_by,
+            image_kind=self.controls.image_kind,
+            selection=selection_tuple(self.state.selected_pixels or []),
+            selection_pixels=self._selection_pixels,
+        )
+        self.state.busy = True
+        return self.runner.submit(request)
+
+    def reset_controls(self) -> None:
+        """Back to the scene the app started with (the paper scene unless --scene was given)."""
+        with self.state:
+            self.state.update({**self.initial_controls.as_state(), "input_message": ""})
+
+    # -- frames from the worker -------------------------------------------------------------------
+    def _compute(self, request: Request) -> Frame:
+        """In the worker thread: the engine's frame, abandoned early if overtaken."""
+        return self.engine.compute(request, stale=self.runner.computing_is_stale)
+
+    def _deliver(self, outcome: Outcome[Frame]) -> None:
+        """Called in the worker thread: hand the outcome to the event loop (or apply it directly
+        when there is no running loop, as in tests without a server)."""
+        loop = self._loop
+        if loop is not None and loop.is_running():
+            loop.call_soon_threadsafe(self.apply_outcome, outcome)
+        else:
+            self.apply_outcome(outcome)
+
+    def apply_outcome(self, outcome: Outcome[Frame]) -> None:
+        """On the UI thread: drop stale outcomes, show errors, push or hold frames."""
+        if not self.runner.is_current(outcome.generation):
+            return  # a newer request is under way: its frame will come
+        if not outcome.ok:
+            self._show_error(outcome.error)
+            return
+        wait_s = self._wait_for_page_s()
+        if wait_s > 0:
+            self._held = outcome  # replaces any older waiting frame
+            if self._loop is not None:
+                self._loop.call_later(wait_s + 0.01, self._release_held)
+            return
+        self._push(outcome)
+
+    def _wait_for_page_s(self) -> float:
+        """0 if a frame may be sent now, else how long until the oldest unreported frame stops
+        counting (the page may never report it: a hidden tab does not paint)."""
+        if not self.flow_control:
+            return 0.0
+        now = time.perf_counter()
+        self._inflight = {k: t for k, t in self._inflight.items() if now - t < self.ack_timeout_s}
+        if len(self._inflight) < self.max_in_flight:
+            return 0.0
+        return self.ack_timeout_s - (now - min(self._inflight.values()))
+
+    def _show_error(self, error: BaseException | None) -> None:
+        if isinstance(error, ValueError):  # SceneError, TargetError: messages meant for users
+            text = f"Simulation failed: {error}"
+        else:
+            text = f"Simulation failed ({type(error).__name__}): {error}"
+        with self.state:
+            self.state.error_message = text + " (showing the last good result)"
+            self.state.busy = bool(self._held)
+
+    def on_frame_shown(self, key: str = "", *_: Any) -> None:
+        """The page drew frame ``key`` (so every frame sent before it is done too): a waiting
+        frame may go."""
+        sent = self._inflight.get(key)
+        if sent is None:
+            return
+        self._inflight = {k: t for k, t in self._inflight.items() if t > sent}
+        self._release_held()
+
+    def _release_held(self) -> None:
+        if self._held is None or self._wait_for_page_s() > 0:
+            return
+        held, self._held = self._held, None
+        if self.runner.is_current(held.generation):
+            self._push(held)
+
+    def _push(self, outcome: Outcome[Frame]) -> None:
+        """Write one frame to the state: a single flush, so the page updates all views at once."""
+        frame = outcome.value
+        assert frame is not None
+        key = f"g{outcome.generation}"
+        total_s = time.perf_counter() - outcome.submitted_at_s
+        cloud = frame.cloud
+        selection, waveforms = self._selection_now(frame)
+        update = {
+            "frustum": frame.frustum,
+            "cloud_points": cloud["points"],
+            "cloud_outliers": cloud["outliers"],
+            "cloud_colorbar": cloud["colorbar"],
+            "n_target_points": cloud["n_target"],
+            "n_outliers": cloud["n_outliers"],
+            "n_points": int(frame.summary["n_points"]),
+            "legend": frame.legend,
+            "array_image": frame.image,
+            "selected_pixels": selection,
+            "waveforms": waveforms,
+            "snr_hist": frame.snr_histogram,
+            "stats": frame.stats,
+            "stages": views.stage_rows(
+                frame.timings_s,
+                {"views (app)": frame.views_s, "request to page": total_s},
+            ),
+            "footprint_text": views.footprint_text(frame.result.scene),
+            "error_message": "",
+            "frame_key": key,
+            "frame_generation": outcome.generation,
+        }
+        if frame.faces_key != self._applied_faces_key:
+            update["seen_facets"] = frame.seen_facets
+            self._applied_faces_key = frame.faces_key
+        self.last_frame = frame
+        self._selection_pixels = frame.result.pixels
+        self._inflight[key] = time.perf_counter()
+        self._held = None  # anything still waiting is older than this frame
+        self.n_frames_pushed += 1
+        with self.state:
+            self.state.update(update)
+            # busy while a newer request than this frame's is under way (or a frame is held)
+            self.state.busy = not self.runner.is_current(outcome.generation) or bool(self._held)
+
+    # -- pixel selection --------------------------------------------------------------------------
+    def _selection_now(self, frame: Frame) -> tuple[list[list[int]], dict]:
+        """The frame's selection and waveforms, unless the user clicked pixels of the same array
+        while it was computed: then those, with their waveforms from this frame."""
+        current = selection_tuple(self.state.selected_pixels or [])
+        asked = frame.request.selection if frame.request else current
+        n = frame.result.pixels
+        if current == asked or not current or self._selection_pixels != n:
+            return frame.selection, frame.waveforms
+        pixels = [[r, c] for r, c in current if 0 <= r < n and 0 <= c < n]
+        return pixels, views.waveform_figure(frame.result, pixels)
+
+    def on_pixel_click(self, row: Any = None, col: Any = None, add: Any = False, *_: Any) -> None:
+        """Click on the array image: select pixel (row, col); with shift, add/remove it."""
+        frame = self.last_frame
+        if frame is None:
+            return
+        n = frame.result.pixels
+        try:
+            r, c = int(row), int(col)
+        except (TypeError, ValueError):
+            return
+        if not (0 <= r < n and 0 <= c < n):
+            return
+        current = [list(p) for p in selection_tuple(self.state.selected_pixels or [])]
+        selection = views.toggle_pixel(current, [r, c], bool(add), MAX_SELECTED_PIXELS)
+        with self.state:
+            self.state.selected_pixels = selection
+            self.state.waveforms = views.waveform_figure(frame.result, selection)
+
+
+def _same(a: Any, b: Any) -> bool:
+    """Equal values, with 5 == 5.0 but '5' != 5 and NaN never equal."""
+    if isinstance(a, bool) != isinstance(b, bool) or isinstance(a, str) != isinstance(b, str):
+        return False
+    if isinstance(a, float) and math.isnan(a):
+        return False
+    return a == b

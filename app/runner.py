@@ -1,0 +1,189 @@
+"""Run requests off the UI thread: debounce, one worker thread, a generation counter.
+
+``submit`` stamps each request with the next generation and keeps only the newest one waiting (a
+mailbox of one, so a slider drag never builds a queue). The worker waits until the requests have
+been quiet for ``debounce_s`` (but no longer than ``max_wait_s`` after the first unserved one, so
+a long drag still updates), computes the newest, and hands the outcome to ``deliver`` only if no
+newer request arrived meanwhile; stale outcomes are dropped and counted.
+
+``compute`` runs in the worker thread only, so it may own objects that are not thread-safe
+(simcore's Pipeline); it may call ``computing_is_stale`` and raise ``StaleRequest`` to give up
+early on a request that has been overtaken. ``deliver`` is called from the worker thread too:
+it must hand the outcome over to the UI thread itself (the app posts it to the event loop).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Generic, TypeVar
+
+Request = TypeVar("Request")
+Value = TypeVar("Value")
+
+log = logging.getLogger(__name__)
+
+
+class StaleRequest(Exception):
+    """Raised by ``compute`` to abandon a request that a newer one has overtaken (see
+    ``Runner.computing_is_stale``); the runner drops it like any stale outcome."""
+
+
+@dataclass(frozen=True)
+class Outcome(Generic[Value]):
+    """The result of one request: a value, or the exception its computation raised."""
+
+    generation: int
+    value: Value | None = None
+    error: BaseException | None = None
+    compute_s: float = 0.0
+    submitted_at_s: float = 0.0  # time.perf_counter() at submit
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+
+class Runner(Generic[Request, Value]):
+    """Debounced, generation-stamped, latest-wins execution of ``compute`` in one worker thread."""
+
+    def __init__(
+        self,
+        compute: Callable[[Request], Value],
+        deliver: Callable[[Outcome[Value]], None],
+        *,
+        debounce_s: float = 0.02,
+        max_wait_s: float = 0.1,
+        name: str = "lmapd-runner",
+    ):
+        self._compute = compute
+        self._deliver = deliver
+        self.debounce_s = debounce_s
+        self.max_wait_s = max_wait_s
+        self._cond = threading.Condition()
+        self._generation = 0
+        self._pending: tuple[int, Request, float] | None = None
+        self._first_unserved_s = 0.0
+        self._last_submit_s = 0.0
+        self._computing = False
+        self._computing_generation = 0
+        self._closed = False
+        self.n_computed = 0
+        self.n_dropped = 0
+        self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
+        self._thread.start()
+
+    # -- the UI side -----------------------------------------------------------------------------
+    def submit(self, request: Request) -> int:
+        """Queue ``request`` (replacing any request still waiting); return its generation."""
+        now = time.perf_counter()
+        with self._cond:
+            if self._closed:
+                raise RuntimeError("the runner is closed")
+            self._generation += 1
+            if self._pending is None:
+                self._first_unserved_s = now
+            self._pending = (self._generation, request, now)
+            self._last_submit_s = now
+            self._cond.notify_all()
+            return self._generation
+
+    @property
+    def generation(self) -> int:
+        """The newest generation handed out."""
+        with self._cond:
+            return self._generation
+
+    def is_current(self, generation: int) -> bool:
+        """True if no newer request than ``generation`` has been submitted."""
+        with self._cond:
+            return generation == self._generation
+
+    def computing_is_stale(self) -> bool:
+        """From inside ``compute``: a newer request has arrived, this result will be dropped."""
+        with self._cond:
+            return self._computing and self._computing_generation != self._generation
+
+    @property
+    def busy(self) -> bool:
+        """A request is waiting or being computed."""
+        with self._cond:
+            return self._computing or self._pending is not None
+
+    def wait_idle(self, timeout_s: float = 30.0) -> bool:
+        """Block until nothing is waiting or computing (for tests and scripts)."""
+        deadline = time.monotonic() + timeout_s
+        with self._cond:
+            while self._computing or self._pending is not None:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    return False
+                self._cond.wait(remaining)
+        return True
+
+    def close(self, timeout_s: float = 5.0) -> None:
+        """Stop the worker after its current computation."""
+        with self._cond:
+            self._closed = True
+            self._pending = None
+            self._cond.notify_all()
+        if threading.current_thread() is not self._thread:
+            self._thread.join(timeout_s)
+
+    # -- the worker side -------------------------------------------------------------------------
+    def _next_request(self) -> tuple[int, Request, float] | None:
+        """Wait for a request and for the debounce; None when closed."""
+        with self._cond:
+            while self._pending is None and not self._closed:
+                self._cond.wait()
+            while not self._closed:
+                now = time.perf_counter()
+                quiet_until = self._last_submit_s + self.debounce_s
+                deadline = min(quiet_until, self._first_unserved_s + self.max_wait_s)
+                if now >= deadline:
+                    break
+                self._cond.wait(deadline - now)
+            if self._closed or self._pending is None:
+                return None
+            pending, self._pending = self._pending, None
+            self._computing = True
+            self._computing_generation = pending[0]
+            return pending
+
+    def _loop(self) -> None:
+        while True:
+            job = self._next_request()
+            if job is None:
+                return
+            generation, request, submitted_at = job
+            t0 = time.perf_counter()
+            try:
+                outcome = Outcome(generation, value=self._compute(request))
+            except StaleRequest:
+                outcome = None
+            except Exception as exc:  # shown to the user as a message, logged with its trace
+                log.exception("computation of generation %d failed", generation)
+                outcome = Outcome(generation, error=exc)
+            self.n_computed += 1
+            stale = outcome is None or not self.is_current(generation)
+            if outcome is not None:
+                outcome = Outcome(
+                    generation,
+                    outcome.value,
+                    outcome.error,
+                    compute_s=time.perf_counter() - t0,
+                    submitted_at_s=submitted_at,
+                )
+            if stale:
+                self.n_dropped += 1
+            else:
+                try:
+                    self._deliver(outcome)
+                except Exception:  # a broken deliver must not kill the worker
+                    log.exception("delivering generation %d failed", generation)
+            with self._cond:
+                self._computing = False
+                self._cond.notify_all()

@@ -1,0 +1,178 @@
+"""The app's UI state: one typed dataclass in display units, the control ranges, and the
+sanitiser that turns whatever arrives from the page (or the websocket) into valid controls.
+
+Display units differ from the scene's SI units in one place only: the pulse energy is shown in mJ
+(``pulse_energy_mj``); every other name matches the scene's quick parameters (``pitch_deg``,
+``azimuth_deg``, ``distance_m``, ``pixels``, ``tnr``, ``seed``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import simcore
+
+COLOR_BY = ("range", "snr", "outlier")
+IMAGE_KINDS = ("range", "peak_power")
+SUBRAY_CHOICES = (1, 4, 16, 64)
+MAX_SELECTED_PIXELS = 8
+
+
+@dataclass(frozen=True)
+class ControlSpec:
+    """One numeric control: its visible label, unit, valid range and slider step."""
+
+    label: str
+    unit: str
+    lo: float
+    hi: float
+    step: float
+    integer: bool = False
+    log_slider: bool = False
+
+    def text(self, value: float) -> str:
+        """The value with its unit, as the page shows it."""
+        unit = f" {self.unit}" if self.unit else ""
+        return f"{value:g}{unit}"
+
+
+# The quick controls, in the order the page shows them.
+SPECS: dict[str, ControlSpec] = {
+    "pitch_deg": ControlSpec("Pitch", "deg", -90.0, 90.0, 1.0),
+    "azimuth_deg": ControlSpec("Azimuth", "deg", -180.0, 180.0, 1.0),
+    "distance_m": ControlSpec("Distance", "m", 20.0, 5000.0, 1.0, log_slider=True),
+    "pixels": ControlSpec("Pixels", "per side", 16, 512, 16, integer=True),
+    "pulse_energy_mj": ControlSpec("Pulse energy", "mJ", 0.01, 50.0, 0.01, log_slider=True),
+    "tnr": ControlSpec("TNR", "", 1.0, 10.0, 0.1),
+    "seed": ControlSpec("Seed", "", 0, 2**31 - 1, 1, integer=True),
+}
+
+
+@dataclass(frozen=True)
+class Controls:
+    """Everything the user can set, in display units. Valid by construction when built by
+    :func:`sanitize_controls`."""
+
+    pitch_deg: float = 0.0
+    azimuth_deg: float = 0.0
+    distance_m: float = 500.0
+    pixels: int = 256
+    pulse_energy_mj: float = 5.0
+    tnr: float = 5.0
+    seed: int = 0
+    subrays: int = 4
+    materials: dict[str, str] = field(default_factory=dict)  # part -> library material
+    color_by: str = "range"
+    image_kind: str = "range"
+
+    def as_state(self) -> dict[str, Any]:
+        """The trame state entries of these controls."""
+        out = dataclasses.asdict(self)
+        out["materials"] = dict(self.materials)
+        return out
+
+
+STATE_KEYS = tuple(f.name for f in dataclasses.fields(Controls))
+
+
+def controls_from_scene(
+    scene: simcore.Scene, part_materials: dict[str, str]
+) -> tuple[Controls, list[str]]:
+    """The controls that reproduce ``scene``, and a message for each scene value outside the
+    app's ranges (clamped: the app cannot show it).
+
+    part_materials : the material of every target part with the scene's overrides applied
+        (``app.logic.scene_map.resolved_materials``).
+    """
+    raw = {
+        "pitch_deg": scene.pose.pitch_deg,
+        "azimuth_deg": scene.pose.azimuth_deg,
+        "distance_m": scene.pose.distance_m,
+        "pixels": scene.detector.pixels,
+        "pulse_energy_mj": scene.laser.pulse_energy_j * 1e3,
+        "tnr": scene.timing.tnr,
+        "seed": scene.seed,
+        "subrays": scene.fidelity.subrays,
+        "materials": dict(part_materials),
+    }
+    return sanitize_controls(raw, Controls(materials=dict(part_materials)))
+
+
+def _number(value: Any, spec: ControlSpec, previous: float) -> tuple[float, str | None]:
+    """A valid number for ``key``: clamped into range, or ``previous`` if ``value`` is no number."""
+    try:
+        if isinstance(value, bool) or value is None or value == "":
+            raise ValueError
+        number = float(value)
+    except (TypeError, ValueError):
+        kept = spec.text(previous)
+        return previous, f"{spec.label}: {value!r} is not a number; kept {kept}"
+    if math.isnan(number):
+        return previous, f"{spec.label}: not a number; kept {spec.text(previous)}"
+    clamped = min(max(number, spec.lo), spec.hi)
+    if spec.integer:
+        clamped = int(round(clamped))
+    message = None
+    if number < spec.lo or number > spec.hi:
+        message = (
+            f"{spec.label} {number:g} is outside {spec.lo:g} to {spec.hi:g} {spec.unit}; "
+            f"set to {spec.text(clamped)}"
+        ).replace("  ", " ")
+    return clamped, message
+
+
+def _choice(label: str, value: Any, choices: tuple, previous: Any) -> tuple[Any, str | None]:
+    if value in choices and not isinstance(value, bool):
+        return value, None
+    for choice in choices:  # "16" from a text field is 16
+        if str(choice) == str(value).strip():
+            return choice, None
+    options = ", ".join(str(c) for c in choices)
+    return previous, f"{label}: {value!r} is not one of {options}; kept {previous}"
+
+
+def _materials(value: Any, previous: dict[str, str]) -> tuple[dict[str, str], list[str]]:
+    if not isinstance(value, dict):
+        return dict(previous), [f"Materials: expected part -> material, got {value!r}; kept"]
+    out, messages = dict(previous), []
+    for part, name in value.items():
+        if previous and part not in previous:
+            messages.append(f"Materials: the target has no part {part!r}; ignored")
+        elif name not in simcore.MATERIAL_NAMES:
+            messages.append(
+                f"Materials: {name!r} is not in the material library; "
+                f"{part} kept {previous.get(part, '?')}"
+            )
+        else:
+            out[str(part)] = str(name)
+    return out, messages
+
+
+def sanitize_controls(raw: dict[str, Any], previous: Controls) -> tuple[Controls, list[str]]:
+    """Valid controls from raw page/websocket values, and a message for each value changed.
+
+    Numbers outside their range are clamped; values that are no number, not one of the choices
+    or unknown materials are refused (the previous value is kept). Never raises.
+    """
+    values: dict[str, Any] = {}
+    messages: list[str] = []
+    for key, spec in SPECS.items():
+        old = getattr(previous, key)
+        values[key], msg = _number(raw.get(key, old), spec, old)
+        messages += [msg] if msg else []
+    choices = (
+        ("subrays", "Sub-rays per pixel", SUBRAY_CHOICES),
+        ("color_by", "Colour points by", COLOR_BY),
+        ("image_kind", "Array image", IMAGE_KINDS),
+    )
+    for key, label, options in choices:
+        old = getattr(previous, key)
+        values[key], msg = _choice(label, raw.get(key, old), options, old)
+        messages += [msg] if msg else []
+    materials = raw.get("materials", previous.materials)
+    values["materials"], msgs = _materials(materials, previous.materials)
+    messages += msgs
+    return Controls(**values), messages

@@ -1,0 +1,186 @@
+"""The drawer: pose and sensor sliders (each with a number field), fidelity, seed, per-part
+materials, display choices and the reset to the paper scene."""
+
+from __future__ import annotations
+
+import math
+
+from trame.widgets import html
+from trame.widgets import vuetify3 as v3
+
+from app.state import SPECS, SUBRAY_CHOICES, ControlSpec
+
+SLOW_RAYS = 2e6  # rays per flash above which the page warns that updates take seconds
+
+
+def _label(spec: ControlSpec) -> str:
+    return f"{spec.label} ({spec.unit})" if spec.unit else spec.label
+
+
+def _number_field(key: str, spec: ControlSpec) -> None:
+    """A compact number field; the value is sent on change (Enter or leaving the field), and the
+    server clamps or refuses it with a message."""
+    v3.VTextField(
+        model_value=(key,),
+        change=f"{key} = $event.target.value",
+        type="number",
+        density="compact",
+        variant="outlined",
+        hide_details=True,
+        single_line=True,
+        style="width: 96px",
+        step=spec.step,
+        aria_label=f"{_label(spec)} value",
+        classes=f"value-{key}",
+        __events=["change"],
+    )
+
+
+def slider(key: str) -> None:
+    """A labelled slider plus number field for one control of ``SPECS``. Distance and pulse
+    energy slide on a log scale (their ranges span 2-4 decades)."""
+    spec = SPECS[key]
+    if spec.log_slider:
+        digits = 3
+        model = (f"Math.log10(Math.max({key}, 1e-12))",)
+        update = f"{key} = Number((10 ** $event).toPrecision({digits}))"
+        bounds = {"min": math.log10(spec.lo), "max": math.log10(spec.hi), "step": 0.001}
+    else:
+        model = (key,)
+        update = f"{key} = $event"
+        bounds = {"min": spec.lo, "max": spec.hi, "step": spec.step}
+    with html.Div(classes=f"control control-{key}"):
+        html.Div(_label(spec), classes="control-label text-body-2")
+        with v3.VSlider(
+            model_value=model,
+            update_modelValue=update,
+            density="compact",
+            hide_details=True,
+            color="primary",
+            track_size=3,
+            thumb_size=14,
+            aria_label=_label(spec),
+            classes=f"slider-{key}",
+            **bounds,
+        ):
+            with v3.Template(v_slot_append=True):
+                _number_field(key, spec)
+
+
+def fidelity_choice() -> None:
+    with html.Div(classes="control control-subrays"):
+        html.Div("Fidelity: sub-rays per pixel", classes="control-label text-body-2")
+        with v3.VBtnToggle(
+            model_value=("subrays",),
+            update_modelValue="subrays = $event",
+            mandatory=True,
+            density="compact",
+            color="primary",
+            variant="outlined",
+            divided=True,
+        ):
+            for n in SUBRAY_CHOICES:
+                v3.VBtn(str(n), value=n, size="small", classes=f"subrays-{n}")
+        html.Div(
+            "{{ (pixels * pixels * subrays / 1e6).toFixed(1) }} M rays per flash: "
+            "expect seconds per update",
+            v_if=f"pixels * pixels * subrays >= {SLOW_RAYS:g}",
+            classes="text-caption text-deep-orange-darken-2 slow-hint",
+        )
+
+
+def seed_field() -> None:
+    spec = SPECS["seed"]
+    with html.Div(classes="control control-seed d-flex align-center ga-2"):
+        v3.VTextField(
+            label="Seed (random draws)",
+            model_value=("seed",),
+            change="seed = $event.target.value",
+            type="number",
+            density="compact",
+            variant="outlined",
+            hide_details=True,
+            step=spec.step,
+            classes="value-seed",
+            __events=["change"],
+        )
+        v3.VBtn(
+            icon="mdi-dice-multiple-outline",
+            size="small",
+            variant="text",
+            title="New random seed",
+            click="seed = Math.floor(Math.random() * 2147483647)",
+        )
+
+
+def materials_panel() -> None:
+    """One drop-down per target part over the material library."""
+    with v3.VExpansionPanels(variant="accordion", classes="mt-2"):
+        with v3.VExpansionPanel():
+            v3.VExpansionPanelTitle("Target materials (per part)", classes="text-body-2")
+            with v3.VExpansionPanelText():
+                v3.VSelect(
+                    v_for="part in part_names",
+                    key="part",
+                    label=("part",),
+                    model_value=("materials[part]",),
+                    update_modelValue="materials = {...materials, [part]: $event}",
+                    items=("material_items",),
+                    density="compact",
+                    variant="outlined",
+                    hide_details=True,
+                    classes="mb-2 material-select",
+                )
+
+
+def display_choices() -> None:
+    with html.Div(classes="control"):
+        html.Div("Colour points by", classes="control-label text-body-2")
+        with v3.VBtnToggle(
+            model_value=("color_by",),
+            update_modelValue="color_by = $event",
+            mandatory=True,
+            density="compact",
+            color="primary",
+            variant="outlined",
+            divided=True,
+        ):
+            v3.VBtn("Range", value="range", size="small")
+            v3.VBtn("SNR", value="snr", size="small")
+            v3.VBtn("Outlier flag", value="outlier", size="small")
+
+
+def section(title: str) -> None:
+    html.Div(title, classes="section-title text-overline")
+
+
+def drawer_content() -> None:
+    """Everything in the drawer, top to bottom."""
+    with html.Div(classes="pa-3 controls"):
+        v3.VBtn(
+            "{{ scene_name === 'paper' ? 'Reset to paper scene' : 'Reset to ' + scene_name }}",
+            prepend_icon="mdi-restore",
+            block=True,
+            variant="tonal",
+            color="primary",
+            click="trigger('reset_controls')",
+            classes="reset-button mb-2",
+        )
+        section("Pose of the target")
+        for key in ("pitch_deg", "azimuth_deg", "distance_m"):
+            slider(key)
+        section("Laser and detector")
+        for key in ("pixels", "pulse_energy_mj", "tnr"):
+            slider(key)
+        fidelity_choice()
+        seed_field()
+        materials_panel()
+        section("Display")
+        display_choices()
+        html.Div(
+            "3D views: drag to rotate, scroll or right-drag to zoom, middle- or Alt-drag to "
+            "pan; the camera icon resets the view. Sliders update the views while you drag; "
+            "number fields apply on Enter, and values outside a range are clamped with a "
+            "message.",
+            classes="text-caption help-text mt-3",
+        )

@@ -1,0 +1,180 @@
+"""The page: app bar (title, busy indicator, frame info), drawer (controls), the views in a grid,
+messages, and a footer with the NASA credit."""
+
+from __future__ import annotations
+
+from trame.ui.vuetify3 import VAppLayout
+from trame.widgets import client, html
+from trame.widgets import vuetify3 as v3
+
+from app.ui import controls, panels, views3d
+
+# After the page applied a frame, wait for it to be painted, then tell the server (frame pacing)
+# and keep a log of paint times for the benchmark (window.lmapdFrames). Vue templates cannot
+# reach browser globals, so the helper hangs on trame.utils.
+FRAME_SCRIPT = """
+window.trame.utils.lmapd = {
+  frameShown(key) {
+    if (!key) return;
+    const applied = performance.now();
+    setTimeout(() => requestAnimationFrame(() => requestAnimationFrame(() => {
+      (window.lmapdFrames = window.lmapdFrames || []).push({ key, applied, t: performance.now() });
+      window.trame.trigger('frame_shown', [key]);
+    })), 0);
+  },
+};
+"""
+FRAME_SHOWN = "trame.utils.lmapd && trame.utils.lmapd.frameShown($event)"
+
+CSS = """
+html { overflow-y: auto; }
+.controls .control { margin-bottom: 2px; }
+.controls .control-label { color: #424242; margin-top: 6px; }
+.controls .v-slider.v-input--horizontal { margin-inline: 4px 0; }
+.controls .v-field__input { padding-inline: 8px 4px; min-height: 32px; padding-top: 4px;
+  padding-bottom: 4px; font-size: 0.85rem; }
+.section-title { color: #1565c0; margin-top: 10px; line-height: 1.6; font-weight: 600; }
+.view-card { height: 100%; display: flex; flex-direction: column; }
+.card-title { font-size: 0.98rem !important; padding: 6px 12px 2px 16px !important; }
+.hint { color: #616161; }
+.vtk-box { position: relative; flex: 1 1 auto; min-height: 300px; height: 38vh;
+  margin: 4px 8px 8px 8px; border-radius: 4px; overflow: hidden; }
+.overlay { position: absolute; pointer-events: none; color: #eceff1; font-size: 12px;
+  background: rgba(20, 22, 28, 0.72); border-radius: 4px; padding: 6px 8px; line-height: 1.45; }
+.legend-overlay { left: 8px; top: 8px; }
+.colorbar-overlay { left: 8px; bottom: 8px; min-width: 210px; }
+.legend-row { display: flex; align-items: center; gap: 6px; }
+.legend-head { color: #b0bec5; font-size: 11px; }
+.legend-count { margin-left: auto; padding-left: 10px; color: #b0bec5;
+  font-variant-numeric: tabular-nums; }
+.swatch { display: inline-block; width: 12px; height: 12px; border-radius: 2px;
+  border: 1px solid rgba(255,255,255,0.35); flex: none; }
+.swatch-line { height: 2px; border: none; background: #ff6b40; }
+.swatch-target { background: #4fc3f7; }
+.swatch-outlier { background: #ff1744; }
+.credit-overlay { position: absolute; right: 8px; bottom: 6px; color: #cfd8dc; font-size: 11px;
+  pointer-events: none; text-shadow: 0 0 3px #000; }
+.colorbar-title { font-size: 12px; }
+.colorbar-bar { height: 10px; border-radius: 2px; margin: 2px 0; }
+.colorbar-labels { display: flex; justify-content: space-between; font-size: 11px;
+  font-variant-numeric: tabular-nums; }
+.array-box { position: relative; width: min(100% - 16px, 33vh); aspect-ratio: 1 / 1;
+  margin: 4px auto 6px auto; background: #1e1e24; }
+.array-image { width: 100%; height: 100%; display: block; image-rendering: pixelated;
+  cursor: crosshair; user-select: none; }
+.pixel-marker { position: absolute; width: 14px; height: 14px; border: 2px solid;
+  border-radius: 50%; transform: translate(-50%, -50%); pointer-events: none;
+  box-shadow: 0 0 0 1px rgba(255,255,255,0.85); }
+.chart-box { position: relative; margin: 0 8px 8px 8px; }
+.waveform-box { height: 37vh; min-height: 300px; }
+.snr-box { height: 120px; }
+.chart-box .js-plotly-plot, .chart-box .plot-container { height: 100%; }
+.stats-table td { height: 22px !important; font-size: 0.78rem; padding: 0 6px !important; }
+.stat-value { font-variant-numeric: tabular-nums; font-weight: 500; text-align: right; }
+.subtitle { color: #616161; }
+.app-title { font-weight: 600; letter-spacing: 0.02em; }
+.footer-text { font-size: 12px; color: #616161; }
+.busy-bar { position: absolute; left: 0; right: 0; bottom: 0; height: 3px; background: #ffd54f; }
+"""
+
+
+def app_bar() -> None:
+    with v3.VAppBar(density="compact", color="#0d47a1", elevation=2):
+        v3.VAppBarNavIcon(click="main_drawer = !main_drawer", color="white")
+        with v3.VToolbarTitle(classes="text-white"):
+            html.Span("lmapd-sim", classes="app-title")
+            html.Span(
+                " · live LM-APD flash-lidar imaging of {{ target_name }}",
+                classes="text-body-2 d-none d-md-inline",
+            )
+        v3.VSpacer()
+        v3.VChip(
+            "{{ n_points.toLocaleString() }} points",
+            size="small",
+            color="white",
+            variant="outlined",
+            classes="mr-2 point-count",
+        )
+        v3.VChip(
+            "computing…",
+            v_show="busy",
+            size="small",
+            color="amber-lighten-3",
+            variant="flat",
+            prepend_icon="mdi-timer-sand",
+            classes="mr-2 busy-chip",
+        )
+        # a static bar, not an animated one: on a software-rendered page an endless animation
+        # repaints 60 times a second and takes CPU from the simulation
+        html.Div(v_show="busy", classes="busy-bar")
+
+
+def messages() -> None:
+    v3.VAlert(
+        "{{ error_message }}",
+        v_if="error_message",
+        type="error",
+        density="compact",
+        variant="tonal",
+        closable=True,
+        click_close="error_message = ''",
+        classes="mb-2 error-message",
+        __events=[("click_close", "click:close")],
+    )
+    v3.VAlert(
+        "{{ input_message }}",
+        v_if="input_message",
+        type="warning",
+        density="compact",
+        variant="tonal",
+        closable=True,
+        click_close="input_message = ''",
+        classes="mb-2 input-message",
+        __events=[("click_close", "click:close")],
+    )
+
+
+def views_grid() -> None:
+    with v3.VContainer(fluid=True, classes="pa-2"):
+        messages()
+        with v3.VRow(dense=True):
+            with v3.VCol(cols=12, lg=6):
+                views3d.scene_card()
+            with v3.VCol(cols=12, lg=6):
+                views3d.cloud_card()
+        with v3.VRow(dense=True):
+            with v3.VCol(cols=12, md=6, lg=3):
+                panels.array_card()
+            with v3.VCol(cols=12, md=6, lg=5):
+                panels.waveform_card()
+            with v3.VCol(cols=12, md=12, lg=4):
+                panels.stats_card()
+
+
+def footer() -> None:
+    with v3.VFooter(app=True, border=True, classes="py-1"):
+        html.Span("{{ credit }}", classes="footer-text nasa-credit")
+        v3.VSpacer()
+        html.Span(
+            "Physics: Wang et al., Electronics 2023, 12, 2261 · built with trame and vtk.js",
+            classes="footer-text",
+        )
+
+
+def build_layout(server) -> VAppLayout:
+    """Build the page on ``server`` (state and triggers are set up by app.logic.controller)."""
+    server.state.setdefault("main_drawer", True)
+    with VAppLayout(server, full_height=True) as layout:
+        client.Style(CSS)
+        client.Script(FRAME_SCRIPT)  # before the watcher below: created first
+        client.ClientStateChange(value="frame_key", change=FRAME_SHOWN, trigger_on_create=True)
+        app_bar()
+        with v3.VNavigationDrawer(
+            v_model=("main_drawer",), width=330, permanent=True, location="left"
+        ):
+            controls.drawer_content()
+        with v3.VMain():
+            views_grid()
+        footer()
+    layout.title = "lmapd-sim"
+    return layout

@@ -1,0 +1,129 @@
+"""The two 3D views, rendered client-side by vtk.js (no server-side OpenGL): the scene (target
+mesh coloured by material where seen, grey where hidden, the field-of-view frustum, a legend)
+and the point cloud (coloured by range, SNR or outlier flag; outliers always red and larger).
+
+Data arrive as base64 typed arrays in the trame state. The whole mesh is sent once and drawn
+grey; each frame sends only the facets seen, in their material colours, drawn over it. Each
+view's camera reset (the button, or the 'r' key) goes to the home camera held in the state.
+"""
+
+from __future__ import annotations
+
+from trame.widgets import html
+from trame.widgets import vtk as vtkw
+from trame.widgets import vuetify3 as v3
+
+from app.logic import encode
+from app.logic.views import HIDDEN_COLOR
+
+BACKGROUND = "[0.102, 0.110, 0.137]"  # #1a1c23
+BACKGROUND_RGB = (26, 28, 35)
+HIDDEN_RGB = [round(c / 255, 3) for c in encode.rgb_of(HIDDEN_COLOR)]
+
+
+def _view(ref: str):
+    """A vtk.js view whose camera resets go to the state's home camera."""
+    return vtkw.VtkView(
+        ref=ref,
+        background=(BACKGROUND,),
+        reset_camera=f"trame.refs['{ref}'].setCamera(home_camera)",
+        __events=[("reset_camera", "resetCamera")],
+    )
+
+
+def _reset_button(ref: str) -> None:
+    v3.VBtn(
+        icon="mdi-camera-retake-outline",
+        size="x-small",
+        variant="text",
+        title="Reset the camera",
+        click=f"trame.refs['{ref}'].resetCamera()",
+    )
+
+
+def _card_title(text: str, ref: str) -> None:
+    with v3.VCardTitle(classes="card-title d-flex align-center"):
+        html.Span(text)
+        v3.VSpacer()
+        _reset_button(ref)
+
+
+def scene_card() -> None:
+    """Target mesh, frustum, material legend and the model credit."""
+    with v3.VCard(classes="view-card scene-card", elevation=1):
+        _card_title("3D scene: target and field of view", "scene_view")
+        with html.Div(classes="vtk-box scene-box"):
+            with _view("scene_view"):
+                with vtkw.VtkGeometryRepresentation(
+                    id="target",
+                    property=(f"{{ color: {HIDDEN_RGB}, ambient: 0.3, diffuse: 0.7 }}",),
+                ):
+                    vtkw.VtkPolyData("target", points=("target_points",), polys=("target_polys",))
+                with vtkw.VtkGeometryRepresentation(
+                    id="seen",
+                    property=("{ ambient: 0.3, diffuse: 0.75, specular: 0.05 }",),
+                    mapper=("{ colorMode: 2, scalarMode: 2 }",),  # direct RGB, per facet
+                    actor=("{ visibility: !!seen_facets }",),
+                ):
+                    vtkw.VtkMesh("seen_facets", state=("seen_facets",))
+                with vtkw.VtkGeometryRepresentation(
+                    id="frustum",
+                    property=("{ color: [1.0, 0.42, 0.25], lineWidth: 1.5, lighting: false }",),
+                    actor=("{ visibility: !!frustum }",),  # no input before the first frame
+                ):
+                    vtkw.VtkMesh("frustum", state=("frustum",))
+            _material_legend()
+            html.Div("{{ credit }}", classes="credit-overlay")
+
+
+def _material_legend() -> None:
+    with html.Div(classes="overlay legend-overlay"):
+        with html.Div(classes="legend-row legend-head"):
+            html.Span("material (facets seen / all)")
+        with html.Div(v_for="m in legend", key="m.name", classes="legend-row"):
+            html.Span(classes="swatch", style=("{ background: m.color }",))
+            html.Span("{{ m.label }}", classes="legend-label")
+            html.Span(
+                "{{ m.seen.toLocaleString() }} / {{ m.total.toLocaleString() }}",
+                classes="legend-count",
+            )
+        with html.Div(classes="legend-row"):
+            html.Span(classes="swatch swatch-line")
+            html.Span("field of view: {{ footprint_text }}", classes="legend-label")
+
+
+def cloud_card() -> None:
+    """The point cloud with its colour bar (or the outlier legend)."""
+    with v3.VCard(classes="view-card cloud-card", elevation=1):
+        _card_title("Point cloud (target-fixed frame, m)", "cloud_view")
+        with html.Div(classes="vtk-box cloud-box"):
+            with _view("cloud_view"):
+                with vtkw.VtkGeometryRepresentation(
+                    id="cloud",
+                    property=("{ pointSize: 3, lighting: false }",),
+                    actor=("{ visibility: !!cloud_points && n_target_points > 0 }",),
+                ):
+                    vtkw.VtkMesh("cloud_points", state=("cloud_points",))
+                with vtkw.VtkGeometryRepresentation(
+                    id="outliers",
+                    property=("{ pointSize: 5, lighting: false }",),
+                    actor=("{ visibility: !!cloud_outliers && n_outliers > 0 }",),
+                ):
+                    vtkw.VtkMesh("cloud_outliers", state=("cloud_outliers",))
+            _cloud_legend()
+
+
+def _cloud_legend() -> None:
+    with html.Div(classes="overlay colorbar-overlay"):
+        with html.Div(v_if="cloud_colorbar", classes="colorbar"):
+            html.Div("{{ cloud_colorbar.title }}", classes="colorbar-title")
+            html.Div(classes="colorbar-bar", style=("{ background: cloud_colorbar.gradient }",))
+            with html.Div(classes="colorbar-labels"):
+                html.Span("{{ cloud_colorbar.lo }}")
+                html.Span("{{ cloud_colorbar.hi }}")
+        with html.Div(v_else=True, classes="legend-row"):
+            html.Span(classes="swatch swatch-target")
+            html.Span("target points: {{ n_target_points.toLocaleString() }}")
+        with html.Div(classes="legend-row"):
+            html.Span(classes="swatch swatch-outlier")
+            html.Span("outliers (false alarms): {{ n_outliers.toLocaleString() }}")

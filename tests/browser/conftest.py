@@ -1,0 +1,41 @@
+"""Browser-test fixtures: the real app server in a subprocess and Debian's headless Chromium.
+
+The tests fail (never skip) when Chromium is missing: the README's `make test` installs it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from app.launch import CHROMIUM_ARGS, CHROMIUM_PATH, app_server, chromium_missing_message
+
+ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
+
+
+@pytest.fixture(scope="session")
+def browser_type_launch_args(browser_type_launch_args):
+    """pytest-playwright's launch options, pointed at Debian's Chromium (never a downloaded one)."""
+    problem = chromium_missing_message()
+    if problem:
+        pytest.fail(problem, pytrace=False)
+    return {**browser_type_launch_args, "executable_path": CHROMIUM_PATH, "args": CHROMIUM_ARGS}
+
+
+@pytest.fixture(scope="session")
+def browser_context_args(browser_context_args):
+    return {**browser_context_args, "viewport": {"width": 1600, "height": 1000}}
+
+
+@pytest.fixture(scope="session")
+def artifacts_dir() -> Path:
+    ARTIFACTS.mkdir(exist_ok=True)
+    return ARTIFACTS
+
+
+@pytest.fixture(scope="session")
+def app_url(artifacts_dir):
+    """The URL of a freshly started app server (paper scene) on a free 127.0.0.1 port."""
+    with app_server(log_path=artifacts_dir / "app-server.log") as url:
+        yield url

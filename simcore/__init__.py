@@ -9,7 +9,7 @@ Public API (re-exports only)::
 
 from .materials import LIBRARY as MATERIALS
 from .materials import MATERIAL_NAMES, Material, brdf
-from .pipeline import STAGES, Pipeline, Result, Waveform, simulate
+from .pipeline import STAGES, Cancelled, Pipeline, Result, Waveform, simulate
 from .scene import (
     PAPER_FORMS,
     PRESETS,
@@ -26,6 +26,7 @@ from .target import TargetError, TargetModel, load_target
 __version__ = "0.1.0"
 
 __all__ = [
+    "Cancelled",
     "MATERIALS",
     "MATERIAL_NAMES",
     "PAPER_FORMS",

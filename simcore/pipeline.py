@@ -10,6 +10,7 @@ Cached arrays are read-only. One Pipeline per thread: it is not shared between t
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -490,6 +491,10 @@ def _deps(scene: Scene) -> dict[str, tuple]:
     }
 
 
+class Cancelled(Exception):
+    """Pipeline.run was told to stop (its result would be stale)."""
+
+
 class Pipeline:
     """Runs scenes through the stages, re-running only those whose inputs changed."""
 
@@ -499,7 +504,9 @@ class Pipeline:
     def clear(self) -> None:
         self._cache.clear()
 
-    def run(self, scene: Scene) -> Result:
+    def run(self, scene: Scene, should_stop: Callable[[], bool] | None = None) -> Result:
+        """Run ``scene``; ``should_stop`` is asked before each stage that must compute, and a
+        True answer raises :class:`Cancelled` (the cache keeps every stage finished so far)."""
         deps = _deps(scene)
         timings: dict[str, float] = {}
         keys: dict[str, tuple] = {}
@@ -511,6 +518,8 @@ class Pipeline:
             if cached is not None and cached[0] == key:
                 timings[name] = 0.0
                 return cached[1]
+            if should_stop is not None and should_stop():
+                raise Cancelled(f"stopped before the {name} stage")
             t0 = time.perf_counter()
             value = compute()
             timings[name] = time.perf_counter() - t0

@@ -128,3 +128,18 @@ def test_the_monte_carlo_noise_model_runs_in_the_pipeline_and_agrees_with_eq_27(
     assert abs(mc.detection.detected.sum() - expected) <= spread  # Eq. 27 is single-look: 2 %
     r = mc.attributes["range_m"]
     assert np.all((r >= 0) & (r <= 1000.0))
+
+
+def test_a_run_told_to_stop_raises_cancelled_and_keeps_what_it_finished():
+    pipe = simcore.Pipeline()
+    scene = simcore.with_overrides(simcore.load_scene(), {"pixels": 16})
+    asked = []
+
+    def stop_after_hits():
+        asked.append(1)
+        return len(asked) > 3  # target, rays, hits run; echo is refused
+
+    with pytest.raises(simcore.Cancelled, match="echo"):
+        pipe.run(scene, should_stop=stop_after_hits)
+    res = pipe.run(scene)
+    assert res.timings_s["hits"] == 0.0 and res.timings_s["echo"] > 0.0

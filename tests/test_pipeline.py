@@ -1,6 +1,7 @@
 """The staged pipeline: caching, reproducibility, the MRO scene, invariants of the scene space."""
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 

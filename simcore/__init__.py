@@ -9,6 +9,7 @@ Public API (re-exports only)::
 
 from .materials import LIBRARY as MATERIALS
 from .materials import MATERIAL_NAMES, Material, brdf
+from .parallel import set_threads
 from .pipeline import STAGES, Cancelled, Pipeline, Result, Waveform, simulate
 from .scene import (
     PAPER_FORMS,
@@ -46,6 +47,7 @@ __all__ = [
     "key_reference",
     "load_scene",
     "load_target",
+    "set_threads",
     "simulate",
     "with_overrides",
 ]

@@ -8,6 +8,7 @@
     lmapd flyaround [SCENE.toml] [--set NAME=VALUE ...] --out DIR [--interval-s 300]
                     [--duration-s SECONDS] [--j2]
     lmapd reproduce --out DIR [--quick] [--seed N]
+    lmapd sweep SWEEP.toml --out DIR [--scheduler ADDRESS] [--workers N]
 
 Errors in the user's input (unknown key, value out of range, missing or broken file) print one
 message naming what is wrong and exit with status 2; no output file is left half-written.
@@ -21,7 +22,7 @@ import os
 import sys
 from pathlib import Path
 
-from . import flyaround, io, reproduce
+from . import flyaround, io, reproduce, sweep
 from .materials import MATERIAL_NAMES
 from .scene import (
     PRESETS,
@@ -34,7 +35,7 @@ from .scene import (
 from .target import TargetError
 
 EXIT_USAGE = 2
-OUTPUT_SUFFIXES = (".ply",)
+OUTPUT_SUFFIXES = io.CLOUD_SUFFIXES
 
 
 class CliError(Exception):
@@ -63,7 +64,7 @@ def _check_output(path: str | None, suffixes, what: str) -> Path | None:
 def cmd_simulate(args) -> int:
     out = _check_output(args.out, OUTPUT_SUFFIXES, "--out")
     summary_path = _check_output(args.summary, (".json",), "--summary")
-    wave_path = _check_output(args.waveforms, (".npz",), "--waveforms")
+    wave_path = _check_output(args.waveforms, io.WAVEFORM_SUFFIXES, "--waveforms")
     scene = _scene_from_args(args)
     from .pipeline import Pipeline  # noqa: PLC0415  (keeps `lmapd keys` and --help fast)
 
@@ -76,11 +77,11 @@ def cmd_simulate(args) -> int:
         f"target {result.target.name}; {result.target.credit}",
         f"material_id indexes: {' '.join(MATERIAL_NAMES)}",
     )
-    io.write_ply(out, result.cloud, comments)
+    io.write_cloud(out, result.cloud, comments)
     if summary_path:
         io.write_json(summary_path, summary)
     if wave_path:
-        io.write_waveforms_npz(wave_path, result)
+        io.write_waveforms(wave_path, result)
     total_ms = 1e3 * sum(result.timings_s.values())
     print(
         f"{summary['n_points']} points ({summary['n_outliers']} outliers, "
@@ -146,9 +147,9 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument(
         "--preset", choices=sorted(PRESETS), help="fidelity preset (sub-rays, time step)"
     )
-    sim.add_argument("--out", required=True, help="point cloud file (.ply)")
+    sim.add_argument("--out", required=True, help="point cloud file (.ply or .las, by suffix)")
     sim.add_argument("--summary", help="JSON summary file")
-    sim.add_argument("--waveforms", help="waveform cube of the lit pixels (.npz)")
+    sim.add_argument("--waveforms", help="waveform cube of the lit pixels (.npz or .h5)")
     sim.set_defaults(func=cmd_simulate)
 
     keys = sub.add_parser("keys", help="list every scene key with its unit, default and range")
@@ -174,6 +175,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     flyaround.add_parser(sub)
     reproduce.add_parser(sub)
+    sweep.add_parser(sub)
     return parser
 
 

@@ -11,7 +11,6 @@ energy, so a pulse-energy change never re-runs this stage.
 
 from __future__ import annotations
 
-import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from functools import lru_cache
@@ -20,11 +19,12 @@ import numpy as np
 from scipy import constants as sc
 from scipy import optimize, special
 
+from . import parallel
+
 C = sc.c  # speed of light [m/s]
 A_FWHM = 2.446386  # Eq. 1 constant for which tau is the FWHM (ours)
 A_PAPER = 3.5  # Eq. 1 constant printed in the paper (FWHM = 0.699 tau)
 _TABLE_SIZE = 1 << 15
-_THREADS = max(1, min(2, os.cpu_count() or 1))
 
 
 def pulse_power_w(t_s, energy_j: float, tau_s: float, a: float = A_FWHM):
@@ -374,7 +374,7 @@ def echo_features(
         return sel, _features_chunk(shape, *args, raw_peak, t_begin)
 
     # numpy releases the GIL in these array passes: two threads use both cores
-    with ThreadPoolExecutor(max_workers=min(_THREADS, max(1, len(jobs)))) as pool:
+    with ThreadPoolExecutor(max_workers=min(parallel.threads(), max(1, len(jobs)))) as pool:
         for sel, out in pool.map(work, jobs):
             peak[sel], t_half[sel], slope[sel] = out[0], out[1], out[2]
             if raw_peak:

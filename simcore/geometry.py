@@ -7,7 +7,6 @@ right-handed. Pixel (row i, col j) of an n x n array looks along the pinhole dir
 
 from __future__ import annotations
 
-import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -22,10 +21,9 @@ except ImportError as exc:  # pragma: no cover - depends on the installation
         "ray caster is far too slow for flash-lidar frames"
     ) from exc
 
+from . import parallel
 from .scene import Pose
 from .target import TargetModel
-
-_THREADS = max(1, min(2, os.cpu_count() or 1))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -199,7 +197,7 @@ class RayCaster:
         n = len(directions_t)
         starts = (origins_t[None, :] + start_m * directions_t).astype(np.float32)
         dirs32 = directions_t.astype(np.float32)
-        chunks = np.array_split(np.arange(n), _THREADS) if n > 4096 else [np.arange(n)]
+        chunks = np.array_split(np.arange(n), parallel.threads()) if n > 4096 else [np.arange(n)]
 
         def run(idx):
             if len(idx) == 0:

@@ -19,6 +19,10 @@ from .scene import ASSETS_DIR, MESH_SUFFIXES, Target
 
 TARGETS_DIR = ASSETS_DIR / "targets"
 MAX_FACES = 5_000_000
+# longest extent of a target once scaled to metres: outside this the scale is surely wrong (a mesh
+# in millimetres read as metres, or the reverse)
+MIN_EXTENT_M = 1e-3
+MAX_EXTENT_M = 1e4
 
 
 class TargetError(ValueError):
@@ -153,6 +157,12 @@ def load_target(target: Target) -> TargetModel:
         scale = settings["longest_extent_m"] / extents.max()
     else:
         scale = float(settings.get("scale_m_per_unit", 1.0))
+    longest_m = float(extents.max()) * scale
+    if not MIN_EXTENT_M <= longest_m <= MAX_EXTENT_M:
+        raise TargetError(
+            f"{path}: the target is {longest_m:.3g} m long once scaled ({scale:g} m per unit); "
+            f"targets must be {MIN_EXTENT_M:g} m to {MAX_EXTENT_M:g} m long: check the scale"
+        )
     mesh.apply_translation(-mesh.bounds.mean(axis=0))
     mesh.apply_scale(scale)
 

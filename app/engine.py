@@ -16,6 +16,7 @@ import numpy as np
 import simcore
 from app.logic import views
 from app.runner import StaleRequest
+from app.state import MAX_SELECTED_PIXELS
 
 
 @dataclass(frozen=True)
@@ -72,11 +73,14 @@ class Engine:
     def compute(self, request: Request, stale: Callable[[], bool] = lambda: False) -> Frame:
         """Simulate ``request.scene`` and build every view's payload (runs in the worker).
 
-        Raises StaleRequest instead of building the views if ``stale()`` says a newer request
-        has arrived meanwhile.
+        Raises StaleRequest if ``stale()`` says a newer request has arrived meanwhile: the
+        pipeline checks it between stages (simcore.Cancelled), and again before the views.
         """
         t0 = time.perf_counter()
-        result = self.pipeline.run(request.scene)
+        try:
+            result = self.pipeline.run(request.scene, should_stop=stale)
+        except simcore.Cancelled:
+            raise StaleRequest from None  # dropped by the runner, not an error
         if stale():
             raise StaleRequest
         t1 = time.perf_counter()
@@ -129,9 +133,11 @@ class Engine:
 
 def selection_tuple(pixels) -> tuple[tuple[int, int], ...]:
     """A hashable copy of a [[row, col], ...] selection; () for anything else (the state may
-    hold whatever a client sent)."""
+    hold whatever a client sent: more than MAX_SELECTED_PIXELS pairs is refused as well)."""
+    if not isinstance(pixels, list | tuple) or len(pixels) > MAX_SELECTED_PIXELS:
+        return ()
     try:
         pairs = np.asarray(pixels, dtype=np.int64).reshape(-1, 2)
-    except (TypeError, ValueError, OverflowError):
+    except (TypeError, ValueError, OverflowError, RecursionError):
         return ()
     return tuple((int(r), int(c)) for r, c in pairs)

@@ -15,7 +15,9 @@ from trame.app import get_server
 
 import simcore
 from app.engine import Engine
+from app.limits import cap_websocket_messages
 from app.logic.controller import AppLogic
+from app.logic.upload import TargetUploads
 from app.ui.layout import build_layout
 
 _server_ids = itertools.count()
@@ -35,6 +37,7 @@ class LmapdApp:
         self.server = server or get_server(f"lmapd-{next(_server_ids)}", client_type="vue3")
         self.engine = engine or Engine(self.scene)
         self.logic = AppLogic(self.server, self.engine, self.scene, **logic_options)
+        self.uploads = TargetUploads(self.logic, self.server)
         self.ui = build_layout(self.server)
         self.server.state.trame__title = "lmapd-sim"
 
@@ -53,13 +56,29 @@ class LmapdApp:
             trame_args if args is None else args, namespace
         )
         self.server.controller.on_server_ready.add(self._announce)
+        cap_websocket_messages()
         self.server.start(
             host=host, port=port, open_browser=False, timeout=0, show_connection_info=False
         )
 
     def _announce(self, **_) -> None:
-        host = self.server.server_options.host
-        print(f"lmapd-sim app: http://{host}:{self.server.port}/  (Ctrl+C stops it)", flush=True)
+        for line in start_message(self.server.server_options.host, self.server.port):
+            print(line, flush=True)
+
+
+LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
+
+
+def start_message(host: str, port: int) -> list[str]:
+    """What the server prints once it listens: its address, and a warning if other machines can
+    reach it (a --host other than the loopback interface)."""
+    lines = [f"lmapd-sim app: http://{host}:{port}/  (Ctrl+C stops it)"]
+    if host not in LOOPBACK_HOSTS:
+        lines.append(
+            f"lmapd-sim app: warning: listening on {host}, not only on this machine: anyone who "
+            "can reach this port can drive the simulator and upload meshes (no authentication)"
+        )
+    return lines
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:

@@ -4,7 +4,9 @@
 mailbox of one, so a slider drag never builds a queue). The worker waits until the requests have
 been quiet for ``debounce_s`` (but no longer than ``max_wait_s`` after the first unserved one, so
 a long drag still updates), computes the newest, and hands the outcome to ``deliver`` only if no
-newer request arrived meanwhile; stale outcomes are dropped and counted.
+newer request arrived meanwhile; stale outcomes are dropped and counted, except that while
+changes keep coming faster than a frame computes, an overtaken frame is still delivered (marked
+``interim``) when none has been delivered for ``min_refresh_s``, so a long drag keeps updating.
 
 ``compute`` runs in the worker thread only, so it may own objects that are not thread-safe
 (simcore's Pipeline); it may call ``computing_is_stale`` and raise ``StaleRequest`` to give up
@@ -41,6 +43,7 @@ class Outcome(Generic[Value]):
     error: BaseException | None = None
     compute_s: float = 0.0
     submitted_at_s: float = 0.0  # time.perf_counter() at submit
+    interim: bool = False  # overtaken, but delivered so that a long drag keeps updating
 
     @property
     def ok(self) -> bool:
@@ -57,12 +60,15 @@ class Runner(Generic[Request, Value]):
         *,
         debounce_s: float = 0.02,
         max_wait_s: float = 0.1,
+        min_refresh_s: float = 0.5,
         name: str = "lmapd-runner",
     ):
         self._compute = compute
         self._deliver = deliver
         self.debounce_s = debounce_s
         self.max_wait_s = max_wait_s
+        self.min_refresh_s = min_refresh_s
+        self._last_delivered_s = time.perf_counter()
         self._cond = threading.Condition()
         self._generation = 0
         self._pending: tuple[int, Request, float] | None = None
@@ -73,6 +79,8 @@ class Runner(Generic[Request, Value]):
         self._closed = False
         self.n_computed = 0
         self.n_dropped = 0
+        self.n_restarts = 0  # workers replaced after dying (see _ensure_worker)
+        self._name = name
         self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
         self._thread.start()
 
@@ -83,6 +91,7 @@ class Runner(Generic[Request, Value]):
         with self._cond:
             if self._closed:
                 raise RuntimeError("the runner is closed")
+            self._ensure_worker()
             self._generation += 1
             if self._pending is None:
                 self._first_unserved_s = now
@@ -103,9 +112,15 @@ class Runner(Generic[Request, Value]):
             return generation == self._generation
 
     def computing_is_stale(self) -> bool:
-        """From inside ``compute``: a newer request has arrived, this result will be dropped."""
+        """From inside ``compute``: a newer request has arrived and this result will be dropped
+        (not when no frame has been delivered for ``min_refresh_s``: then it is shown anyway)."""
         with self._cond:
-            return self._computing and self._computing_generation != self._generation
+            overtaken = self._computing and self._computing_generation != self._generation
+            return overtaken and not self._refresh_due()
+
+    def _refresh_due(self) -> bool:
+        """With the lock held: no outcome delivered for ``min_refresh_s``."""
+        return time.perf_counter() - self._last_delivered_s >= self.min_refresh_s
 
     @property
     def busy(self) -> bool:
@@ -153,7 +168,41 @@ class Runner(Generic[Request, Value]):
             self._computing_generation = pending[0]
             return pending
 
+    def _ensure_worker(self) -> None:
+        """With the lock held: start a new worker if the current one died (it raised something
+        no ``except Exception`` catches, or its thread ended while the runner is open)."""
+        if self._thread.is_alive() or self._closed:
+            return
+        log.warning("the runner's worker thread died; starting a new one")
+        self._computing = False
+        self.n_restarts += 1
+        self._thread = threading.Thread(target=self._loop, name=self._name, daemon=True)
+        self._thread.start()
+
     def _loop(self) -> None:
+        """The worker: serve requests until closed; if serving dies, report the request it was
+        computing as failed and hand over to a new worker."""
+        try:
+            self._serve()
+        except BaseException as exc:  # noqa: BLE001 - the worker must survive anything
+            log.exception("the runner's worker died")
+            with self._cond:
+                generation = self._computing_generation if self._computing else 0
+                self._computing = False
+                self._cond.notify_all()
+            if generation and self.is_current(generation):
+                try:
+                    error = RuntimeError(f"the worker stopped ({type(exc).__name__}); restarted")
+                    self._deliver(Outcome(generation, error=error))
+                except Exception:
+                    log.exception("delivering the worker's failure failed")
+            with self._cond:
+                if self._thread is threading.current_thread() and not self._closed:
+                    self.n_restarts += 1
+                    self._thread = threading.Thread(target=self._loop, name=self._name, daemon=True)
+                    self._thread.start()
+
+    def _serve(self) -> None:
         while True:
             job = self._next_request()
             if job is None:
@@ -169,6 +218,8 @@ class Runner(Generic[Request, Value]):
                 outcome = Outcome(generation, error=exc)
             self.n_computed += 1
             stale = outcome is None or not self.is_current(generation)
+            with self._cond:
+                interim = stale and outcome is not None and outcome.ok and self._refresh_due()
             if outcome is not None:
                 outcome = Outcome(
                     generation,
@@ -176,10 +227,13 @@ class Runner(Generic[Request, Value]):
                     outcome.error,
                     compute_s=time.perf_counter() - t0,
                     submitted_at_s=submitted_at,
+                    interim=interim,
                 )
-            if stale:
+            if stale and not interim:
                 self.n_dropped += 1
             else:
+                with self._cond:
+                    self._last_delivered_s = time.perf_counter()
                 try:
                     self._deliver(outcome)
                 except Exception:  # a broken deliver must not kill the worker

@@ -18,7 +18,12 @@ import simcore
 COLOR_BY = ("range", "snr", "outlier")
 IMAGE_KINDS = ("range", "peak_power")
 SUBRAY_CHOICES = (1, 4, 16, 64)
+# fidelity presets of the core, plus "custom": the scene's fidelity with ``subrays`` sub-rays
+PRESET_CHOICES = (*simcore.PRESETS, "custom")
+DEFAULT_PRESET = "interactive"
 MAX_SELECTED_PIXELS = 8
+MAX_ECHO_CHARS = 40  # a refused value is quoted in its message at most this long
+MAX_MATERIAL_ENTRIES = 256  # a materials mapping with more entries is refused whole
 
 
 @dataclass(frozen=True)
@@ -63,7 +68,8 @@ class Controls:
     pulse_energy_mj: float = 5.0
     tnr: float = 5.0
     seed: int = 0
-    subrays: int = 4
+    subrays: int = 4  # used by the "custom" preset only
+    preset: str = DEFAULT_PRESET
     materials: dict[str, str] = field(default_factory=dict)  # part -> library material
     color_by: str = "range"
     image_kind: str = "range"
@@ -96,9 +102,35 @@ def controls_from_scene(
         "tnr": scene.timing.tnr,
         "seed": scene.seed,
         "subrays": scene.fidelity.subrays,
+        "preset": preset_of(scene),
         "materials": dict(part_materials),
     }
     return sanitize_controls(raw, Controls(materials=dict(part_materials)))
+
+
+def echo(value: Any) -> str:
+    """A short quote of a value from the page for a message (a huge string or list sent over the
+    websocket must not come back as a huge message)."""
+    if isinstance(value, str | int | float | bool | type(None)):
+        text = repr(value[: MAX_ECHO_CHARS + 1] if isinstance(value, str) else value)
+    else:
+        text = f"a {type(value).__name__}"
+        if isinstance(value, list | dict | tuple):
+            text += f" of {len(value)} items"
+    return text if len(text) <= MAX_ECHO_CHARS else text[: MAX_ECHO_CHARS - 1] + "…"
+
+
+def preset_of(scene: simcore.Scene) -> str:
+    """The app's fidelity choice for ``scene``: the preset whose knobs it has (its own preset
+    first), the app's default for the core's default fidelity, else "custom"."""
+    names = [scene.preset] if scene.preset in simcore.PRESETS else []
+    for name in names + [n for n in simcore.PRESETS if n not in names]:
+        knobs = simcore.PRESETS[name]
+        if all(getattr(scene.fidelity, k.split(".", 1)[1]) == v for k, v in knobs.items()):
+            return name
+    if scene.fidelity == simcore.Scene().fidelity:
+        return DEFAULT_PRESET
+    return "custom"
 
 
 def _number(value: Any, spec: ControlSpec, previous: float) -> tuple[float, str | None]:
@@ -107,9 +139,9 @@ def _number(value: Any, spec: ControlSpec, previous: float) -> tuple[float, str 
         if isinstance(value, bool) or value is None or value == "":
             raise ValueError
         number = float(value)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         kept = spec.text(previous)
-        return previous, f"{spec.label}: {value!r} is not a number; kept {kept}"
+        return previous, f"{spec.label}: {echo(value)} is not a number; kept {kept}"
     if math.isnan(number):
         return previous, f"{spec.label}: not a number; kept {spec.text(previous)}"
     clamped = min(max(number, spec.lo), spec.hi)
@@ -128,23 +160,25 @@ def _choice(label: str, value: Any, choices: tuple, previous: Any) -> tuple[Any,
     if value in choices and not isinstance(value, bool):
         return value, None
     for choice in choices:  # "16" from a text field is 16
-        if str(choice) == str(value).strip():
+        if isinstance(value, str | int | float) and str(choice) == str(value).strip():
             return choice, None
     options = ", ".join(str(c) for c in choices)
-    return previous, f"{label}: {value!r} is not one of {options}; kept {previous}"
+    return previous, f"{label}: {echo(value)} is not one of {options}; kept {previous}"
 
 
 def _materials(value: Any, previous: dict[str, str]) -> tuple[dict[str, str], list[str]]:
     if not isinstance(value, dict):
-        return dict(previous), [f"Materials: expected part -> material, got {value!r}; kept"]
+        return dict(previous), [f"Materials: expected part -> material, got {echo(value)}; kept"]
+    if len(value) > MAX_MATERIAL_ENTRIES:
+        return dict(previous), [f"Materials: {len(value)} entries is too many; kept"]
     out, messages = dict(previous), []
     for part, name in value.items():
         if previous and part not in previous:
-            messages.append(f"Materials: the target has no part {part!r}; ignored")
+            messages.append(f"Materials: the target has no part {echo(part)}; ignored")
         elif name not in simcore.MATERIAL_NAMES:
             messages.append(
-                f"Materials: {name!r} is not in the material library; "
-                f"{part} kept {previous.get(part, '?')}"
+                f"Materials: {echo(name)} is not in the material library; "
+                f"{echo(part)} kept {previous.get(part, '?')}"
             )
         else:
             out[str(part)] = str(name)
@@ -165,6 +199,7 @@ def sanitize_controls(raw: dict[str, Any], previous: Controls) -> tuple[Controls
         messages += [msg] if msg else []
     choices = (
         ("subrays", "Sub-rays per pixel", SUBRAY_CHOICES),
+        ("preset", "Fidelity preset", PRESET_CHOICES),
         ("color_by", "Colour points by", COLOR_BY),
         ("image_kind", "Array image", IMAGE_KINDS),
     )

@@ -190,3 +190,31 @@ def test_a_computation_can_give_up_once_overtaken(make_runner):
     assert runner.wait_idle(5)
     assert gave_up == ["slow"] and [o.value for o in seen.outcomes] == ["fresh"]
     assert runner.n_dropped == 1
+
+
+def test_a_steady_stream_of_changes_still_shows_frames_every_min_refresh():
+    """Changes faster than a frame computes: overtaken frames are shown as interim frames at
+    least every min_refresh_s instead of none until the stream stops."""
+    delivered = []
+    runner = Runner(
+        lambda x: (time.sleep(0.05), x)[1],
+        delivered.append,
+        debounce_s=0.0,
+        max_wait_s=0.0,
+        min_refresh_s=0.2,
+    )
+    try:
+        t_end = time.perf_counter() + 1.5
+        n = 0
+        while time.perf_counter() < t_end:
+            n += 1
+            runner.submit(n)
+            time.sleep(0.01)  # a change every 10 ms, a frame takes 50 ms
+        assert runner.wait_idle(5.0)
+    finally:
+        runner.close()
+    interim = [o for o in delivered if o.interim]
+    assert len(interim) >= 4  # about every 0.2 s of the 1.5 s stream
+    assert delivered[-1].value == n and not delivered[-1].interim  # the final state comes last
+    generations = [o.generation for o in delivered]
+    assert generations == sorted(generations)

@@ -11,7 +11,15 @@ from hypothesis import strategies as st
 
 import simcore
 from app.logic.scene_map import resolved_materials, scene_from_controls, scene_overrides
-from app.state import SPECS, SUBRAY_CHOICES, Controls, controls_from_scene, sanitize_controls
+from app.state import (
+    PRESET_CHOICES,
+    SPECS,
+    SUBRAY_CHOICES,
+    Controls,
+    controls_from_scene,
+    preset_of,
+    sanitize_controls,
+)
 
 PARTS = {"foil": "coating_1", "solar_L": "solar_panel"}
 
@@ -42,7 +50,10 @@ def test_the_paper_scene_maps_to_controls_and_back_to_the_same_scene():
     assert scene.detector == paper.detector
     assert scene.laser == paper.laser
     assert scene.timing == paper.timing
-    assert scene.seed == paper.seed and scene.fidelity == paper.fidelity
+    assert scene.seed == paper.seed
+    # the paper scene has the core's default fidelity: the app runs it with its own default
+    assert controls.preset == "interactive" and scene.preset == "interactive"
+    assert scene.fidelity == simcore.with_overrides(paper, {"preset": "interactive"}).fidelity
     assert dict(scene.target.materials) == model_materials
 
 
@@ -68,6 +79,7 @@ def test_controls_in_display_units_become_si_scene_values():
         tnr=4,
         seed=7,
         subrays=16,
+        preset="custom",
         materials={"foil": "lambertian"},
     )
     scene = scene_from_controls(simcore.load_scene(), controls)
@@ -139,11 +151,40 @@ _anything = st.one_of(
 
 
 @settings(max_examples=200, deadline=None)
-@given(raw=st.fixed_dictionaries({key: _anything for key in [*SPECS, "subrays", "color_by"]}))
+@given(
+    raw=st.fixed_dictionaries({key: _anything for key in [*SPECS, "subrays", "preset", "color_by"]})
+)
 def test_any_websocket_values_give_valid_controls_and_a_valid_scene(raw):
     controls, _ = sanitize_controls(raw, Controls())
     for key, spec in SPECS.items():
         value = getattr(controls, key)
         assert spec.lo <= value <= spec.hi and math.isfinite(value)
-    assert controls.subrays in SUBRAY_CHOICES
+    assert controls.subrays in SUBRAY_CHOICES and controls.preset in PRESET_CHOICES
     scene_from_controls(simcore.load_scene(), controls)  # never raises for sanitised controls
+
+
+@pytest.mark.parametrize("name", ["interactive", "balanced", "reference"])
+def test_a_fidelity_preset_reaches_the_scene_with_its_knobs(name):
+    scene = scene_from_controls(simcore.load_scene(), Controls(preset=name, subrays=16))
+    knobs = simcore.PRESETS[name]
+    assert scene.preset == name
+    for key, value in knobs.items():
+        assert getattr(scene.fidelity, key.split(".", 1)[1]) == value  # subrays=16 is ignored
+    assert preset_of(scene) == name
+
+
+def test_custom_fidelity_keeps_the_scenes_knobs_with_the_chosen_subrays():
+    paper = simcore.load_scene()
+    scene = scene_from_controls(paper, Controls(preset="custom", subrays=16))
+    assert scene.fidelity.subrays == 16
+    assert scene.fidelity.refine_subrays == paper.fidelity.refine_subrays
+    assert preset_of(scene) == "custom"
+
+
+def test_a_scene_with_its_own_fidelity_opens_as_custom_and_a_bad_preset_is_refused():
+    scene = simcore.with_overrides(simcore.load_scene(), {"fidelity.subrays": 16})
+    model = simcore.load_target(scene.target)
+    controls, messages = controls_from_scene(scene, resolved_materials(model, scene))
+    assert (controls.preset, controls.subrays, messages) == ("custom", 16, [])
+    kept, messages = sanitize_controls({"preset": "ultra"}, controls)
+    assert kept.preset == "custom" and messages[0].startswith("Fidelity preset: 'ultra'")

@@ -18,6 +18,7 @@ from typing import Any
 import simcore
 from app.engine import Engine, Frame, Request, selection_tuple
 from app.logic import views
+from app.logic.flyaround import FlyaroundLogic
 from app.logic.scene_map import resolved_materials, scene_from_controls
 from app.runner import Outcome, Runner
 from app.state import (
@@ -66,12 +67,14 @@ class AppLogic:
         self._applied_faces_key: tuple | None = None
         self._inflight: dict[str, float] = {}  # frame key -> time pushed, not yet drawn
         self._held: Outcome[Frame] | None = None
+        self._pushed_generation = 0  # generation of the frame the page shows
         self._selection_pixels = 0
         self.runner: Runner[Request, Frame] = Runner(
             self._compute, self._deliver, debounce_s=debounce_s
         )
         self._init_state(startup_messages)
         self.state.change(*STATE_KEYS)(self.on_controls_change)
+        self.flyaround = FlyaroundLogic(self)  # mode, time slider, play (its own state)
         server.trigger("pixel_click")(self.on_pixel_click)
         server.trigger("frame_shown")(self.on_frame_shown)
         server.trigger("reset_controls")(self.reset_controls)
@@ -131,7 +134,7 @@ class AppLogic:
             self.state.update(fixed)  # the page shows the value actually used
         self.controls = controls
         try:
-            scene = scene_from_controls(self.base_scene, controls)
+            scene = self.flyaround.apply(scene_from_controls(self.base_scene, controls))
         except ValueError as exc:  # SceneError: a value the core refuses
             self.state.error_message = f"Invalid scene: {exc}"
             return
@@ -151,7 +154,7 @@ class AppLogic:
         self.state.busy = True
         return self.runner.submit(request)
 
-    def reset_controls(self) -> None:
+    def reset_controls(self, *_: Any, **__: Any) -> None:
         """Back to the scene the app started with (the paper scene unless --scene was given)."""
         with self.state:
             self.state.update({**self.initial_controls.as_state(), "input_message": ""})
@@ -172,7 +175,7 @@ class AppLogic:
 
     def apply_outcome(self, outcome: Outcome[Frame]) -> None:
         """On the UI thread: drop stale outcomes, show errors, push or hold frames."""
-        if not self.runner.is_current(outcome.generation):
+        if not self._still_wanted(outcome):
             return  # a newer request is under way: its frame will come
         if not outcome.ok:
             self._show_error(outcome.error)
@@ -205,10 +208,11 @@ class AppLogic:
             self.state.error_message = text + " (showing the last good result)"
             self.state.busy = bool(self._held)
 
-    def on_frame_shown(self, key: str = "", *_: Any) -> None:
+    def on_frame_shown(self, key: str = "", *_: Any, **__: Any) -> None:
         """The page drew frame ``key`` (so every frame sent before it is done too): a waiting
         frame may go."""
-        sent = self._inflight.get(key)
+        self.flyaround.on_frame_shown(key)  # playing: the next step may go
+        sent = self._inflight.get(key) if isinstance(key, str) else None
         if sent is None:
             return
         self._inflight = {k: t for k, t in self._inflight.items() if t > sent}
@@ -218,8 +222,15 @@ class AppLogic:
         if self._held is None or self._wait_for_page_s() > 0:
             return
         held, self._held = self._held, None
-        if self.runner.is_current(held.generation):
+        if self._still_wanted(held):
             self._push(held)
+
+    def _still_wanted(self, outcome: Outcome[Frame]) -> bool:
+        """The newest request's outcome, or an interim frame (a long drag keeps updating) newer
+        than what the page shows."""
+        if self.runner.is_current(outcome.generation):
+            return True
+        return outcome.interim and outcome.generation > self._pushed_generation
 
     def _push(self, outcome: Outcome[Frame]) -> None:
         """Write one frame to the state: a single flush, so the page updates all views at once."""
@@ -256,6 +267,7 @@ class AppLogic:
             update["seen_facets"] = frame.seen_facets
             self._applied_faces_key = frame.faces_key
         self.last_frame = frame
+        self._pushed_generation = outcome.generation
         self._selection_pixels = frame.result.pixels
         self._inflight[key] = time.perf_counter()
         self._held = None  # anything still waiting is older than this frame
@@ -277,7 +289,9 @@ class AppLogic:
         pixels = [[r, c] for r, c in current if 0 <= r < n and 0 <= c < n]
         return pixels, views.waveform_figure(frame.result, pixels)
 
-    def on_pixel_click(self, row: Any = None, col: Any = None, add: Any = False, *_: Any) -> None:
+    def on_pixel_click(
+        self, row: Any = None, col: Any = None, add: Any = False, *_: Any, **__: Any
+    ) -> None:
         """Click on the array image: select pixel (row, col); with shift, add/remove it."""
         frame = self.last_frame
         if frame is None:
@@ -285,7 +299,7 @@ class AppLogic:
         n = frame.result.pixels
         try:
             r, c = int(row), int(col)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):  # inf, NaN, "x", [1]
             return
         if not (0 <= r < n and 0 <= c < n):
             return

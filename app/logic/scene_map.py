@@ -17,9 +17,32 @@ def scene_overrides(controls: Controls) -> dict[str, object]:
         "pulse_energy_j": float(controls.pulse_energy_mj) * 1e-3,
         "tnr": float(controls.tnr),
         "seed": int(controls.seed),
-        "fidelity.subrays": int(controls.subrays),
+        **fidelity_overrides(controls),
         "target.materials": dict(controls.materials),
     }
+
+
+def fidelity_overrides(controls: Controls) -> dict[str, object]:
+    """A core preset by name, or (``custom``) the scene's fidelity with the chosen sub-rays."""
+    if controls.preset in simcore.PRESETS:
+        return {"preset": controls.preset}
+    return {"fidelity.subrays": int(controls.subrays)}
+
+
+def preset_text(name: str) -> str:
+    """What a fidelity preset sets, in words with units (for the page's tooltips and hints)."""
+    knobs = simcore.PRESETS[name]
+    subrays = knobs["fidelity.subrays"]
+    text = f"{subrays} sub-ray{'s' if subrays > 1 else ''} per pixel"
+    refine = knobs.get("fidelity.refine_subrays", 0)
+    if refine:
+        step_cm = knobs.get("fidelity.refine_step_m", 0.0) * 100
+        text += f", {refine} on mixed pixels (edges, depth steps > {step_cm:g} cm)"
+    else:
+        text += ", no refinement"
+    step_s = knobs.get("fidelity.time_step_s", 0.0)
+    text += f", time step {step_s * 1e12:g} ps" if step_s else ", time step auto"
+    return text
 
 
 def scene_from_controls(base: simcore.Scene, controls: Controls) -> simcore.Scene:

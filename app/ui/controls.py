@@ -8,7 +8,11 @@ import math
 from trame.widgets import html
 from trame.widgets import vuetify3 as v3
 
-from app.state import SPECS, SUBRAY_CHOICES, ControlSpec
+import simcore
+from app.logic.scene_map import preset_text
+from app.state import PRESET_CHOICES, SPECS, SUBRAY_CHOICES, ControlSpec
+from app.ui import flyaround
+from app.ui.upload import upload_panel
 
 SLOW_RAYS = 2e6  # rays per flash above which the page warns that updates take seconds
 
@@ -68,8 +72,36 @@ def slider(key: str) -> None:
 
 
 def fidelity_choice() -> None:
-    with html.Div(classes="control control-subrays"):
-        html.Div("Fidelity: sub-rays per pixel", classes="control-label text-body-2")
+    """The fidelity preset (its knobs in the tooltips and the hint below), or custom sub-rays."""
+    texts = {name: preset_text(name) for name in simcore.PRESETS}
+    texts["custom"] = "the fidelity of the scene with the sub-rays per pixel chosen below"
+    subrays = "subrays"  # a JS expression: sub-rays per pixel of the chosen preset
+    for name, knobs in simcore.PRESETS.items():
+        subrays = f"(preset === '{name}' ? {knobs['fidelity.subrays']} : {subrays})"
+    with html.Div(classes="control control-preset"):
+        items = [
+            {"title": name.capitalize(), "value": name, "subtitle": texts[name]}
+            for name in PRESET_CHOICES
+        ]
+        v3.VSelect(
+            label="Fidelity preset",
+            model_value=("preset",),
+            update_modelValue="preset = $event",
+            items=("preset_items", items),
+            item_props=True,
+            density="compact",
+            variant="outlined",
+            hide_details=True,
+            classes="mt-2 preset-select",
+        )
+        for name in PRESET_CHOICES:
+            html.Div(
+                texts[name],
+                v_if=f"preset === '{name}'",
+                classes=f"text-caption hint preset-hint preset-hint-{name}",
+            )
+    with html.Div(v_if="preset === 'custom'", classes="control control-subrays"):
+        html.Div("Custom: sub-rays per pixel", classes="control-label text-body-2")
         with v3.VBtnToggle(
             model_value=("subrays",),
             update_modelValue="subrays = $event",
@@ -81,12 +113,12 @@ def fidelity_choice() -> None:
         ):
             for n in SUBRAY_CHOICES:
                 v3.VBtn(str(n), value=n, size="small", classes=f"subrays-{n}")
-        html.Div(
-            "{{ (pixels * pixels * subrays / 1e6).toFixed(1) }} M rays per flash: "
-            "expect seconds per update",
-            v_if=f"pixels * pixels * subrays >= {SLOW_RAYS:g}",
-            classes="text-caption text-deep-orange-darken-2 slow-hint",
-        )
+    html.Div(
+        f"{{{{ (pixels * pixels * {subrays} / 1e6).toFixed(1) }}}} M rays per flash: "
+        "expect seconds per update",
+        v_if=f"pixels * pixels * {subrays} >= {SLOW_RAYS:g}",
+        classes="text-caption text-deep-orange-darken-2 slow-hint",
+    )
 
 
 def seed_field() -> None:
@@ -166,15 +198,19 @@ def drawer_content() -> None:
             click="trigger('reset_controls')",
             classes="reset-button mb-2",
         )
-        section("Pose of the target")
-        for key in ("pitch_deg", "azimuth_deg", "distance_m"):
-            slider(key)
+        flyaround.mode_switch()
+        with html.Div(v_show="mode !== 'flyaround'", classes="single-pose"):
+            section("Pose of the target")
+            for key in ("pitch_deg", "azimuth_deg", "distance_m"):
+                slider(key)
+        flyaround.flyaround_panel()
         section("Laser and detector")
         for key in ("pixels", "pulse_energy_mj", "tnr"):
             slider(key)
         fidelity_choice()
         seed_field()
         materials_panel()
+        upload_panel()
         section("Display")
         display_choices()
         html.Div(

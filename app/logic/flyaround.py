@@ -1,0 +1,306 @@
+"""Fly-around mode: the target imaged along the two orbits of Table 3, one frame per time step.
+
+In this mode the pose of each frame comes from ``simcore.orbit.relative_pose_series`` (distance
+and attitude quaternion at time t; the quaternion replaces pitch/azimuth), every other control
+(pixels, energy, TNR, fidelity, materials) still applies. The time slider picks a frame; play
+steps through the frames, one computed result at a time: the next time is set only once the
+newest request's frame has been drawn by the page, and at most every ``min_interval_s``.
+
+``FlyaroundPoses`` and ``Player`` are plain objects (tested with a fake clock);
+``FlyaroundLogic`` binds them to the trame state and to ``AppLogic``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+import simcore
+from simcore import orbit
+
+if TYPE_CHECKING:
+    from app.logic.controller import AppLogic
+
+MODES = ("single", "flyaround")
+INTERVAL_S = 300.0  # the paper's imaging interval
+MIN_STEP_INTERVAL_S = 0.6  # play: at most one step this often, even when frames are fast
+
+# the trame state of the mode (everything else is in app.state.Controls)
+STATE_KEYS = ("mode", "fly_t_s", "fly_j2")
+
+
+@dataclass(frozen=True)
+class FlyaroundControls:
+    """The fly-around's own controls: the mode, the frame time [s] and the J2 switch."""
+
+    mode: str = "single"
+    t_s: float = 0.0
+    j2: bool = False
+
+
+class FlyaroundPoses:
+    """The imaging times and the relative pose at each (with and without J2, computed once)."""
+
+    def __init__(
+        self,
+        interval_s: float = INTERVAL_S,
+        duration_s: float = orbit.PAPER_PERIOD_S,
+        target: orbit.Elements = orbit.PAPER_TARGET,
+        imaging: orbit.Elements = orbit.PAPER_IMAGING,
+    ):
+        self.interval_s = float(interval_s)
+        self.times_s = orbit.flyaround_times(interval_s, duration_s)
+        self._orbits = (target, imaging)
+        self._poses: dict[bool, orbit.RelativePose] = {}
+
+    @property
+    def t_max_s(self) -> float:
+        return float(self.times_s[-1])
+
+    def pose(self, j2: bool) -> orbit.RelativePose:
+        if j2 not in self._poses:
+            self._poses[j2] = orbit.relative_pose_series(*self._orbits, self.times_s, j2=j2)
+        return self._poses[j2]
+
+    def index_of(self, t_s: float) -> int:
+        """The frame nearest ``t_s``."""
+        return int(np.argmin(np.abs(self.times_s - float(t_s))))
+
+    def overrides(self, t_s: float, j2: bool) -> dict[str, Any]:
+        """The ``simcore.with_overrides`` keys of the frame at ``t_s``: attitude and distance."""
+        pose, i = self.pose(j2), self.index_of(t_s)
+        return {
+            "pose.quaternion_wxyz": [float(q) for q in pose.quaternion_wxyz[i]],
+            "distance_m": float(pose.distance_m[i]),
+        }
+
+    def readout(self, t_s: float, j2: bool, fov_rad: float) -> dict[str, str]:
+        """What the page shows of the frame at ``t_s``: time, distance, attitude, field of view."""
+        pose, i = self.pose(j2), self.index_of(t_s)
+        distance = float(pose.distance_m[i])
+        a0, a1, a2 = (float(a) for a in pose.angles_deg[i])
+        return {
+            "t": f"{float(self.times_s[i]):.0f} s (frame {i + 1} of {len(self.times_s)})",
+            "distance": f"{distance:.1f} m",
+            "angles": f"{a0:.1f}°, {a1:.1f}°, {a2:.1f}°",
+            "fov": f"{distance * fov_rad:.1f} m",
+        }
+
+
+def sanitize_flyaround(
+    raw: dict[str, Any], previous: FlyaroundControls, poses: FlyaroundPoses
+) -> tuple[FlyaroundControls, list[str]]:
+    """Valid fly-around controls from page/websocket values and a message for each value changed:
+    the time snaps to the nearest frame (clamped into the fly-around); a mode that is not one of
+    MODES, a time that is no number or a J2 flag that is no boolean is refused. Never raises."""
+    messages: list[str] = []
+    mode = raw.get("mode", previous.mode)
+    if mode not in MODES:
+        messages.append(f"Mode: {str(mode)[:40]!r} is not one of {', '.join(MODES)}; kept")
+        mode = previous.mode
+    value = raw.get("t_s", previous.t_s)
+    try:
+        if isinstance(value, bool) or value is None or value == "":
+            raise ValueError
+        t_s = float(value)
+        if math.isnan(t_s):
+            raise ValueError
+    except (TypeError, ValueError, OverflowError):
+        messages.append(f"Time: {str(value)[:40]!r} is not a number; kept {previous.t_s:g} s")
+        t_s = previous.t_s
+    snapped = float(poses.times_s[poses.index_of(min(max(t_s, 0.0), poses.t_max_s))])
+    if t_s < 0.0 or t_s > poses.t_max_s:
+        messages.append(f"Time {t_s:g} s is outside 0 to {poses.t_max_s:g} s; set to {snapped:g} s")
+    j2 = raw.get("j2", previous.j2)
+    if not isinstance(j2, bool):
+        messages.append(f"J2: {str(j2)[:40]!r} is not true or false; kept {previous.j2}")
+        j2 = previous.j2
+    return FlyaroundControls(mode=str(mode), t_s=snapped, j2=j2), messages
+
+
+class Player:
+    """Play/pause stepping: when may the next frame time be set?
+
+    Never queues: the next step waits until the frame of the current step has been drawn, and
+    steps are at least ``min_interval_s`` apart (so fast frames can still be seen).
+    """
+
+    def __init__(
+        self,
+        min_interval_s: float = MIN_STEP_INTERVAL_S,
+        clock: Callable[[], float] = time.monotonic,
+    ):
+        self.min_interval_s = min_interval_s
+        self.clock = clock
+        self.playing = False
+        self.n_steps = 0
+        self._last_step_s = -math.inf
+
+    def play(self) -> None:
+        self.playing = True
+
+    def pause(self) -> None:
+        self.playing = False
+
+    def wait_s(self, frame_drawn: bool) -> float | None:
+        """None if no step is due (paused, or the current frame is not drawn yet); else the
+        seconds until the next step may go (0: now)."""
+        if not self.playing or not frame_drawn:
+            return None
+        return max(0.0, self._last_step_s + self.min_interval_s - self.clock())
+
+    def step(self, index: int, n_frames: int) -> int:
+        """Record a step now; the frame after ``index`` (after the last: the first again)."""
+        self._last_step_s = self.clock()
+        self.n_steps += 1
+        return (index + 1) % max(n_frames, 1)
+
+
+class FlyaroundLogic:
+    """The fly-around mode on a trame state, driving ``AppLogic``.
+
+    The controller calls ``apply`` on every scene it builds and ``on_frame_shown`` when the page
+    reports a frame drawn; everything else (state, handlers, play timer) lives here.
+    """
+
+    def __init__(
+        self,
+        logic: AppLogic,
+        poses: FlyaroundPoses | None = None,
+        player: Player | None = None,
+    ):
+        self.logic = logic
+        self.state = logic.state
+        self.poses = poses or FlyaroundPoses()
+        self.player = player or Player()
+        self.controls = FlyaroundControls()
+        self._drawn_key = ""
+        self._timer: asyncio.TimerHandle | None = None
+        self.state.update(
+            {
+                "mode": self.controls.mode,
+                "fly_t_s": self.controls.t_s,
+                "fly_j2": self.controls.j2,
+                "fly_playing": False,
+                "fly_t_max_s": self.poses.t_max_s,
+                "fly_interval_s": self.poses.interval_s,
+                "fly_readout": self._readout(),
+            }
+        )
+        self.state.change(*STATE_KEYS)(self.on_change)
+        self.state.change("fly_playing")(self.on_playing_change)
+
+    # -- scene -----------------------------------------------------------------------------------
+    @property
+    def active(self) -> bool:
+        return self.controls.mode == "flyaround"
+
+    def apply(self, scene: simcore.Scene) -> simcore.Scene:
+        """``scene`` with the orbit's pose at the current time in fly-around mode (else as is)."""
+        if not self.active:
+            return scene
+        return simcore.with_overrides(
+            scene, self.poses.overrides(self.controls.t_s, self.controls.j2)
+        )
+
+    def _readout(self) -> dict[str, str]:
+        fov_rad = self.logic.base_scene.receive.fov_rad
+        return self.poses.readout(self.controls.t_s, self.controls.j2, fov_rad)
+
+    # -- state handlers --------------------------------------------------------------------------
+    def on_change(self, **_: Any) -> None:
+        """Mode, time or J2 changed: sanitise, write back corrections, resubmit if it matters."""
+        raw = {"mode": self.state.mode, "t_s": self.state.fly_t_s, "j2": self.state.fly_j2}
+        controls, messages = sanitize_flyaround(raw, self.controls, self.poses)
+        if messages:
+            self.state.input_message = "; ".join(messages)
+        fixed: dict[str, Any] = {}
+        if raw["mode"] != controls.mode:
+            fixed["mode"] = controls.mode
+        t_raw = raw["t_s"]
+        if isinstance(t_raw, bool) or not isinstance(t_raw, int | float) or t_raw != controls.t_s:
+            fixed["fly_t_s"] = controls.t_s
+        if raw["j2"] is not controls.j2:
+            fixed["fly_j2"] = controls.j2
+        if controls == self.controls and not fixed:
+            return  # e.g. the first call at server start: AppLogic submits the first frame
+        changed = controls != self.controls
+        was_active = self.active
+        self.controls = controls
+        fixed["fly_readout"] = self._readout()
+        if not self.active and self.state.fly_playing:
+            self.player.pause()
+            fixed["fly_playing"] = False
+        self.state.update(fixed)
+        if changed and (self.active or was_active):
+            self.logic.on_controls_change()
+
+    def on_playing_change(self, fly_playing: Any = False, **_: Any) -> None:
+        """The play/pause button."""
+        if fly_playing is True and self.active:
+            self.player.play()
+            self.tick()
+        else:
+            self.player.pause()
+            self._cancel_timer()
+            if fly_playing is not False:
+                self.state.fly_playing = False
+
+    def on_frame_shown(self, key: Any) -> None:
+        """From the controller: the page drew frame ``key``."""
+        if isinstance(key, str):
+            self._drawn_key = key
+        self.tick()
+
+    # -- playing ---------------------------------------------------------------------------------
+    def frame_drawn(self) -> bool:
+        """The frame of the newest request is on the page and drawn (nothing newer computing)."""
+        runner = self.logic.runner
+        return (
+            not runner.busy
+            and self.state.frame_generation == runner.generation
+            and bool(self._drawn_key)
+            and self._drawn_key == self.state.frame_key
+        )
+
+    def tick(self) -> None:
+        """Step to the next frame time if one is due; else schedule the next check."""
+        if not (self.player.playing and self.active):
+            return
+        if not self.logic.runner.busy and self.state.error_message:
+            self.player.pause()  # the frame failed: stop rather than skip over it
+            self.state.fly_playing = False
+            return
+        wait = self.player.wait_s(self.frame_drawn())
+        if wait is None:
+            return  # on_frame_shown calls again
+        if wait > 0:
+            self._schedule(wait)
+            return
+        index = self.player.step(self.poses.index_of(self.controls.t_s), len(self.poses.times_s))
+        with self.state:
+            self.state.fly_t_s = float(self.poses.times_s[index])
+
+    def _schedule(self, delay_s: float) -> None:
+        self._cancel_timer()
+        try:
+            loop = asyncio.get_running_loop()
+        except RuntimeError:  # no event loop (tests): the caller ticks
+            return
+        if loop.is_running():
+            self._timer = loop.call_later(delay_s, self._on_timer)
+
+    def _on_timer(self) -> None:
+        self._timer = None
+        self.tick()
+
+    def _cancel_timer(self) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None

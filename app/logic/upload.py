@@ -1,0 +1,348 @@
+"""Users' own target meshes, uploaded from the page.
+
+Only the upload's bytes are used: the client's file name is ignored except for its extension
+(from an allow-list), and no path given by the client is ever opened. The bytes are parsed in
+memory by trimesh with no file resolver (an OBJ's ``mtllib``, a glTF's external ``uri`` or a PLY's
+texture file are never looked up on the server), checked against the caps below, and re-encoded as
+one self-contained binary glTF in a private temporary directory (``tempfile.mkdtemp``, mode 0700,
+removed at exit). The core then loads that file like any scene's mesh
+(``simcore.with_overrides(scene, {"target.mesh": path, "target.scale_m_per_unit": s})``), which
+refuses meshes with no triangles, NaN vertices, zero area or an implausible size.
+
+Parsing and loading run off the event loop; the page shows a message for every refusal.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import atexit
+import dataclasses
+import io
+import logging
+import math
+import os
+import shutil
+import tempfile
+import threading
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import trimesh
+
+import simcore
+from app.engine import Engine
+from app.logic.scene_map import resolved_materials
+from app.state import echo
+
+log = logging.getLogger(__name__)
+
+ALLOWED_SUFFIXES = (".glb", ".gltf", ".obj", ".stl", ".ply")
+MAX_UPLOAD_BYTES = 32 * 2**20  # 32 MiB per file
+MAX_UPLOAD_FACES = 1_000_000  # triangles per uploaded target
+SCALE_RANGE = (1e-6, 1e4)  # metres per mesh unit
+DEFAULT_SCALE = 1.0
+
+
+class UploadError(ValueError):
+    """An upload that cannot be used; the message is shown on the page as it is."""
+
+
+def upload_suffix(name: Any) -> str:
+    """The lower-case extension of the client's file name, if it is an allowed mesh format (the
+    rest of the name is never used)."""
+    suffix = os.path.splitext(str(name)[-260:])[1].lower() if isinstance(name, str) else ""
+    if suffix not in ALLOWED_SUFFIXES:
+        allowed = ", ".join(ALLOWED_SUFFIXES)
+        raise UploadError(f"{echo(name)} is not a mesh file: use one of {allowed}")
+    return suffix
+
+
+def upload_content(value: Any) -> tuple[bytes, str]:
+    """The bytes and the extension of an upload as trame's client sends it (a dict with ``name``,
+    ``size`` and ``content``, or a list holding one). Raises UploadError."""
+    if isinstance(value, list | tuple):
+        if len(value) != 1:
+            raise UploadError("upload one mesh file at a time")
+        value = value[0]
+    if not isinstance(value, dict):
+        raise UploadError(f"not a file upload ({echo(value)})")
+    suffix = upload_suffix(value.get("name"))
+    size = value.get("size")
+    if isinstance(size, int | float) and size > MAX_UPLOAD_BYTES:
+        raise UploadError(_too_big(size))
+    content = value.get("content")
+    if isinstance(content, memoryview | bytearray):
+        content = bytes(content)
+    if not isinstance(content, bytes):
+        error = value.get("error")
+        why = f": {echo(error)}" if error else ""
+        raise UploadError(f"the browser could not read the file{why}")
+    if len(content) > MAX_UPLOAD_BYTES:
+        raise UploadError(_too_big(len(content)))
+    if not content:
+        raise UploadError("the file is empty")
+    return content, suffix
+
+
+def _too_big(size: float) -> str:
+    limit = MAX_UPLOAD_BYTES >> 20
+    return f"the file is {size / 2**20:.1f} MiB; uploads are limited to {limit} MiB"
+
+
+def self_contained_glb(data: bytes, suffix: str) -> tuple[bytes, int]:
+    """Parse a mesh file from its bytes alone and re-encode it as one binary glTF (parts kept as
+    its geometries); also return its triangle count. Raises UploadError for files that cannot
+    be read, hold no triangles, too many, or non-finite vertices."""
+    try:
+        loaded = trimesh.load(io.BytesIO(data), file_type=suffix[1:], force=None, resolver=None)
+    except Exception as exc:  # trimesh raises many types for malformed files
+        text = f"cannot read the {suffix} file ({type(exc).__name__}: {exc})"
+        raise UploadError(text[:300]) from None
+    scene = loaded if isinstance(loaded, trimesh.Scene) else trimesh.Scene(loaded)
+    meshes = [g for g in scene.geometry.values() if isinstance(g, trimesh.Trimesh)]
+    n_faces = sum(len(g.faces) for g in meshes)
+    if n_faces == 0:
+        raise UploadError("the mesh has no triangles")
+    if n_faces > MAX_UPLOAD_FACES:
+        raise UploadError(f"the mesh has {n_faces:,} triangles; the limit is {MAX_UPLOAD_FACES:,}")
+    if not all(np.isfinite(g.vertices).all() for g in meshes):
+        raise UploadError("the mesh has NaN or infinite vertex coordinates")
+    try:
+        return bytes(scene.export(file_type="glb")), n_faces
+    except Exception as exc:
+        raise UploadError(f"cannot convert the mesh ({type(exc).__name__}: {exc})"[:300]) from None
+
+
+def scale_value(value: Any) -> float:
+    """A valid scale in metres per mesh unit, or UploadError."""
+    try:
+        scale = float(value)
+    except (TypeError, ValueError, OverflowError):
+        raise UploadError(f"scale {echo(value)} is not a number") from None
+    lo, hi = SCALE_RANGE
+    if not (math.isfinite(scale) and lo <= scale <= hi):
+        raise UploadError(f"scale {echo(value)} is outside {lo:g} to {hi:g} m per unit")
+    return scale
+
+
+class PrivateDir:
+    """A private temporary directory (0700), created on first use and removed at exit."""
+
+    def __init__(self) -> None:
+        self._path: Path | None = None
+        self._lock = threading.Lock()
+        self._count = 0
+
+    @property
+    def path(self) -> Path:
+        with self._lock:
+            if self._path is None:
+                self._path = Path(tempfile.mkdtemp(prefix="lmapd-upload-"))
+                os.chmod(self._path, 0o700)
+                atexit.register(self.cleanup)
+            return self._path
+
+    def write(self, data: bytes, suffix: str) -> Path:
+        """A new file in the directory holding ``data`` (a name of our own, never the client's)."""
+        folder = self.path
+        with self._lock:
+            self._count += 1
+            path = folder / f"upload-{self._count}{suffix}"
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        return path
+
+    def cleanup(self) -> None:
+        with self._lock:
+            path, self._path = self._path, None
+        if path is not None:
+            shutil.rmtree(path, ignore_errors=True)
+
+
+@dataclasses.dataclass(frozen=True)
+class LoadedTarget:
+    scene: simcore.Scene
+    engine: Engine
+    path: Path | None
+    n_faces: int
+
+
+def target_scene(base: simcore.Scene, path: Path, scale: float) -> simcore.Scene:
+    """``base`` with the uploaded mesh as its target (no material map, no part overrides: the
+    parts are new)."""
+    return simcore.with_overrides(
+        base,
+        {
+            "target.mesh": str(path),
+            "target.scale_m_per_unit": scale,
+            "target.material_map": "",
+            "target.materials": {},
+        },
+    )
+
+
+def load_uploaded(base: simcore.Scene, path: Path, scale: float) -> LoadedTarget:
+    """Load our own copy of an upload as the target of ``base`` (in a worker thread).
+    Raises UploadError with the core's message for meshes it refuses."""
+    try:
+        scene = target_scene(base, path, scale)
+        model = simcore.load_target(scene.target)
+    except ValueError as exc:  # TargetError, SceneError: messages meant for users
+        text = str(exc).replace(f"{path}: ", "").replace(str(path), "the mesh")
+        raise UploadError(text) from None
+    return LoadedTarget(scene, Engine(scene, model=model), path, len(model.mesh.faces))
+
+
+class TargetUploads:
+    """The upload controls' logic: state ``upload_file`` (from the file input), ``upload_scale``,
+    trigger ``use_builtin_target``; ``upload_message`` / ``upload_error`` / ``upload_busy`` for the
+    page. Swaps the app's target (engine, base scene, material drop-downs) when a mesh loads."""
+
+    def __init__(self, logic, server) -> None:
+        self.logic = logic
+        self.server = server
+        self.state = server.state
+        self.builtin = LoadedTarget(logic.base_scene, logic.engine, None, 0)
+        self.builtin_initial = logic.initial_controls
+        self.current = self.builtin
+        self.files = PrivateDir()
+        self._ticket = 0
+        self._raw: bytes | None = None  # the current upload's glb, to re-load with a new scale
+        self.state.update(
+            {
+                "upload_file": None,
+                "upload_scale": DEFAULT_SCALE,
+                "upload_message": "",
+                "upload_error": "",
+                "upload_busy": False,
+                "target_is_upload": False,
+                "upload_max_mib": MAX_UPLOAD_BYTES >> 20,
+                "upload_max_faces": MAX_UPLOAD_FACES,
+            }
+        )
+        self.state.change("upload_file")(self.on_upload)
+        self.state.change("upload_scale")(self.on_scale)
+        server.trigger("use_builtin_target")(self.use_builtin)
+        server.controller.on_server_exited.add(lambda **_: self.files.cleanup())
+
+    # -- handlers (event loop) --------------------------------------------------------------------
+    def on_upload(self, upload_file: Any = None, **_: Any) -> None:
+        if not upload_file:  # None, or an empty selection (the input was cleared)
+            return
+        self.state.upload_file = None  # drop the bytes from the shared state at once
+        try:
+            content, suffix = upload_content(upload_file)
+            scale = scale_value(self.state.upload_scale)
+        except UploadError as exc:
+            self._fail(str(exc))
+            return
+
+        def work() -> LoadedTarget:
+            glb, _ = self_contained_glb(content, suffix)
+            path = self.files.write(glb, ".glb")
+            return load_uploaded(self.builtin.scene, path, scale)
+
+        self._start(work)
+
+    def on_scale(self, upload_scale: Any = None, **_: Any) -> None:
+        try:
+            scale = scale_value(upload_scale)
+        except UploadError as exc:
+            self.state.upload_error = f"{exc}; kept the previous scale"
+            return
+        current = self.current
+        if current.path is None:
+            return  # the built-in target has its own scale
+        if current.scene.target.scale_m_per_unit == scale:
+            return
+        self._start(lambda: load_uploaded(self.builtin.scene, current.path, scale))
+
+    def use_builtin(self, *_: Any, **__: Any) -> None:
+        self._ticket += 1  # any upload still loading is dropped
+        self._switch(self.builtin, "")
+        self.state.update({"upload_busy": False, "upload_error": ""})
+
+    # -- off the loop and back -------------------------------------------------------------------
+    def _start(self, work: Callable[[], LoadedTarget]) -> None:
+        self._ticket += 1
+        ticket = self._ticket
+        self.state.update({"upload_busy": True, "upload_error": "", "upload_message": ""})
+        loop = _running_loop() if self.server.running else None
+        if loop is None:  # tests without a server: run it here
+            self._finish(ticket, _attempt(work))
+            return
+        future = loop.run_in_executor(None, _attempt, work)
+        future.add_done_callback(lambda f: f.cancelled() or self._finish(ticket, f.result()))
+
+    def _finish(self, ticket: int, outcome: LoadedTarget | str) -> None:
+        if ticket != self._ticket:
+            return  # overtaken by a newer upload or the built-in target
+        with self.state:
+            self.state.upload_busy = False
+            if isinstance(outcome, str):
+                self._fail(outcome)
+                return
+            model = outcome.engine.model
+            extent = float(model.mesh.extents.max())
+            text = (
+                f"Loaded {outcome.n_faces:,} triangles in {len(model.part_names)} part(s), "
+                f"{extent:.3g} m long"
+            )
+            self._switch(outcome, text)
+
+    def _fail(self, text: str) -> None:
+        self.state.update({"upload_error": f"Upload refused: {text}", "upload_busy": False})
+
+    def _switch(self, target: LoadedTarget, message: str) -> None:
+        """Make ``target`` the app's target: new engine and base scene, the material drop-downs of
+        its parts, its mesh in the 3D view, then a new frame."""
+        logic = self.logic
+        old = self.current
+        self.current = target
+        model = target.engine.model
+        materials = resolved_materials(model, target.scene)
+        logic.base_scene = target.scene
+        logic.engine = target.engine
+        logic.initial_controls = dataclasses.replace(self.builtin_initial, materials=materials)
+        logic.controls = dataclasses.replace(logic.controls, materials=materials)
+        logic._applied_faces_key = None
+        geometry = target.engine.target_geometry()
+        with self.state:
+            self.state.update(
+                {
+                    "target_name": model.name if target.path is None else "uploaded mesh",
+                    "credit": model.credit or "",
+                    "part_names": list(model.part_names),
+                    "materials": dict(materials),
+                    "target_points": geometry["points"],
+                    "target_polys": geometry["polys"],
+                    "seen_facets": None,
+                    "home_camera": target.engine.home_camera(),
+                    "upload_message": message,
+                    "target_is_upload": target.path is not None,
+                }
+            )
+        logic.on_controls_change()
+        if old.path is not None and old.path != target.path:
+            old.path.unlink(missing_ok=True)
+
+
+def _attempt(work: Callable[[], LoadedTarget]) -> LoadedTarget | str:
+    """``work()``, or the message of why it failed (never a trace on the page)."""
+    try:
+        return work()
+    except UploadError as exc:
+        return str(exc)
+    except Exception as exc:
+        log.exception("loading an upload failed")
+        return f"the mesh could not be loaded ({type(exc).__name__})"
+
+
+def _running_loop() -> asyncio.AbstractEventLoop | None:
+    try:
+        return asyncio.get_running_loop()
+    except RuntimeError:
+        return None

@@ -1,0 +1,89 @@
+"""The drawer's mode switch (single frame / fly-around) and the fly-around panel: time slider,
+play/pause, the J2 switch and a readout of the frame's time, distance and attitude."""
+
+from __future__ import annotations
+
+from trame.widgets import html
+from trame.widgets import vuetify3 as v3
+
+FOV_HINT = (
+    "Pose from the two orbits of Table 3 (lidar tracking the target). At about 200 m the 30 mrad "
+    "field of view covers only about 6 m of the 15 m MRO: the views show part of the target, as "
+    "expected. Pitch, azimuth and distance come from the orbit; the other controls still apply."
+)
+
+
+def mode_switch() -> None:
+    with html.Div(classes="control control-mode"):
+        html.Div("Mode", classes="control-label text-body-2")
+        with v3.VBtnToggle(
+            model_value=("mode",),
+            update_modelValue="mode = $event",
+            mandatory=True,
+            density="compact",
+            color="primary",
+            variant="outlined",
+            divided=True,
+            classes="mode-toggle",
+        ):
+            v3.VBtn("Single frame", value="single", size="small", classes="mode-single")
+            v3.VBtn("Fly-around", value="flyaround", size="small", classes="mode-flyaround")
+
+
+def flyaround_panel() -> None:
+    """Shown in fly-around mode only."""
+    with html.Div(v_show="mode === 'flyaround'", classes="flyaround-panel"):
+        html.Div("Fly-around (one orbit)", classes="section-title text-overline")
+        with html.Div(classes="control control-fly_t_s"):
+            html.Div("Time (s) since the epoch", classes="control-label text-body-2")
+            with v3.VSlider(
+                model_value=("fly_t_s",),
+                update_modelValue="fly_t_s = $event",
+                min=0,
+                max=("fly_t_max_s",),
+                step=("fly_interval_s",),
+                density="compact",
+                hide_details=True,
+                color="primary",
+                track_size=3,
+                thumb_size=14,
+                aria_label="Time (s)",
+                classes="slider-fly_t_s",
+            ):
+                with v3.Template(v_slot_prepend=True):
+                    v3.VBtn(
+                        icon=("fly_playing ? 'mdi-pause' : 'mdi-play'",),
+                        size="small",
+                        variant="tonal",
+                        color="primary",
+                        title=("fly_playing ? 'Pause' : 'Play: step through the frames'",),
+                        click="fly_playing = !fly_playing",
+                        classes="fly-play",
+                    )
+                with v3.Template(v_slot_append=True):
+                    html.Span(
+                        "{{ fly_t_s }} s",
+                        classes="text-body-2 fly-t-value",
+                        style="min-width: 58px; text-align: right",
+                    )
+        v3.VCheckbox(
+            model_value=("fly_j2",),
+            update_modelValue="fly_j2 = $event",
+            label="J2 secular drift of the orbits",
+            density="compact",
+            hide_details=True,
+            color="primary",
+            classes="fly-j2",
+        )
+        with v3.VTable(density="compact", classes="stats-table fly-readout"):
+            with html.Tbody():
+                for label, key in (
+                    ("Time", "t"),
+                    ("Distance", "distance"),
+                    ("Attitude x, y′, z″", "angles"),
+                    ("Field of view across", "fov"),
+                ):
+                    with html.Tr():
+                        html.Td(label)
+                        html.Td(f"{{{{ fly_readout.{key} }}}}", classes="stat-value")
+        html.Div(FOV_HINT, classes="text-caption hint fly-hint mt-1")

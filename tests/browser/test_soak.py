@@ -1,0 +1,25 @@
+"""Soak test in real headless Chromium: 300 rapid changes across all sliders leave the server
+alive, its memory grown by less than 100 MB, and the view showing the final state's result; two
+clients at once both see correct results (app.soak does the work; scripts/soak_app.py prints it)."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from app.soak import run_soak
+
+pytestmark = pytest.mark.browser
+
+
+def test_300_rapid_slider_changes_then_two_clients(browser, app_url, artifacts_dir):
+    t0 = time.monotonic()
+    report = run_soak(browser, app_url, n_changes=300)
+    (artifacts_dir / "soak.txt").write_text("\n".join(report.lines()) + "\n")
+    assert report.server_alive
+    assert report.rss_growth_mb < 100, report.lines()
+    assert report.final_state_ok, report.lines()
+    assert report.two_clients_ok, report.lines()
+    assert report.frames_drawn >= 1
+    assert time.monotonic() - t0 < 90, report.lines()

@@ -11,7 +11,6 @@ energy, so a pulse-energy change never re-runs this stage.
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -357,7 +356,7 @@ def echo_features(
     t_begin = shape.rising_time_s(min(0.4 / k, 0.1)) - 2 * dt
     span = shape.t_peak_s + t_d - t_begin + 3 * dt
     n_samples = np.ceil((t_last - t_first + span) / dt).astype(np.int64) + 2
-    n_samples = ((n_samples + 3) // 4) * 4  # few distinct lengths, little padding
+    n_samples = _bucket_lengths(n_samples)
     peak = np.zeros(n)
     t_half = np.zeros(n)
     slope = np.zeros(n)
@@ -373,13 +372,30 @@ def echo_features(
         args = (arrivals[sel], weights[sel], t_first[sel], length, dt, t_d, k_att)
         return sel, _features_chunk(shape, *args, raw_peak, t_begin)
 
-    # numpy releases the GIL in these array passes: two threads use both cores
-    with ThreadPoolExecutor(max_workers=min(parallel.threads(), max(1, len(jobs)))) as pool:
-        for sel, out in pool.map(work, jobs):
-            peak[sel], t_half[sel], slope[sel] = out[0], out[1], out[2]
-            if raw_peak:
-                peak_raw[sel] = out[3]
+    # numpy releases the GIL in these array passes: two threads use both cores, when the work is
+    # large enough to repay starting them
+    if int(np.sum(n_samples)) * k > _THREAD_MIN_ELEMENTS:
+        outputs = parallel.map_threads(work, jobs)
+    else:
+        outputs = [work(job) for job in jobs]
+    for sel, out in outputs:
+        peak[sel], t_half[sel], slope[sel] = out[0], out[1], out[2]
+        if raw_peak:
+            peak_raw[sel] = out[3]
     return EchoFeatures(peak, t_half, slope, peak_raw)
+
+
+_THREAD_MIN_ELEMENTS = 1 << 18  # below this, a thread pool costs more than it saves
+
+
+def _bucket_lengths(n_samples: np.ndarray) -> np.ndarray:
+    """Round window lengths up to a few sizes (multiples of 4 up to 32, then steps of 1/8 of a
+    power of two: at most ~25 % padding), so that pixels share a few array shapes."""
+    n = np.maximum(np.asarray(n_samples), 4)
+    small = ((n + 3) // 4) * 4
+    step = 2 ** np.floor(np.log2(n)).astype(np.int64) // 8
+    large = ((n + step - 1) // np.maximum(step, 1)) * np.maximum(step, 1)
+    return np.where(n <= 32, small, large)
 
 
 def echo_waveform(shape: PulseShape, arrivals_s, weights, dt: float):

@@ -7,7 +7,6 @@ right-handed. Pixel (row i, col j) of an n x n array looks along the pinhole dir
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -204,11 +203,7 @@ class RayCaster:
                 return {"tfar": np.zeros(0, np.float32), "primID": np.zeros(0, np.int32)}
             return self._scene.run(starts[idx], dirs32[idx], output=1)
 
-        if len(chunks) > 1:
-            with ThreadPoolExecutor(len(chunks)) as pool:
-                results = list(pool.map(run, chunks))
-        else:
-            results = [run(chunks[0])]
+        results = parallel.map_threads(run, chunks)
         face = np.concatenate([r["primID"] for r in results]).astype(np.int32)
         tfar = np.concatenate([r["tfar"] for r in results]).astype(np.float64)
         hit = face >= 0

@@ -8,6 +8,13 @@ Results never depend on it.
 from __future__ import annotations
 
 import os
+import threading
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
+
+T = TypeVar("T")
+R = TypeVar("R")
 
 _threads = max(1, min(2, os.cpu_count() or 1))
 
@@ -22,3 +29,25 @@ def set_threads(n: int) -> None:
 
 def threads() -> int:
     return _threads
+
+
+_pool = None
+_pool_size = 0
+_pool_lock = threading.Lock()
+
+
+def map_threads(fn: Callable[[T], R], items: Sequence[T]) -> list[R]:
+    """``[fn(x) for x in items]`` on the shared pool of ``threads()`` threads (kept alive between
+    frames: starting threads per call costs more than small frames gain). Serial for one item or
+    one thread."""
+    global _pool, _pool_size
+    if len(items) <= 1 or _threads == 1:
+        return [fn(x) for x in items]
+    with _pool_lock:
+        if _pool is None or _pool_size != _threads:
+            if _pool is not None:
+                _pool.shutdown(wait=False)
+            _pool = ThreadPoolExecutor(max_workers=_threads, thread_name_prefix="simcore")
+            _pool_size = _threads
+        pool = _pool
+    return list(pool.map(fn, items))

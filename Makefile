@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed-stamp
 HOST ?= 127.0.0.1
 PORT ?= 8080
 
-.PHONY: app test bench lint format chromium clean
+.PHONY: app test bench soak lint format chromium clean
 
 $(STAMP): pyproject.toml
 	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "lmapd-sim needs Python >= 3.11"'
@@ -26,6 +26,10 @@ test: $(STAMP) chromium
 ## make bench: the core's stage timings (README table)
 bench: $(STAMP)
 	$(BIN)/lmapd bench
+
+## make soak: 300 rapid slider changes in headless Chromium, then the figures of the README
+soak: $(STAMP) chromium
+	$(BIN)/python scripts/soak_app.py
 
 lint: $(STAMP)
 	$(BIN)/ruff check simcore app tests

@@ -20,13 +20,14 @@ from .target import load_target
 
 FRAME_STAGES = ("hits", "echo", "receiver", "detection", "cloud")
 
-_MEMORY_PROBE = """
+_MEMORY_PROBE = r"""
+import sys
 import simcore
 from simcore.bench import high_water_mb
 simcore.load_target(simcore.load_scene().target)
 base = high_water_mb()
 simcore.simulate(pixels={pixels}, overrides={{"fidelity.subrays": {subrays}}})
-print(base, high_water_mb())
+sys.stdout.write(f"{{base}} {{high_water_mb()}}\n")
 """
 
 
@@ -132,8 +133,10 @@ def format_table(fig: dict) -> str:
 
 
 def main(quick: bool = False, json_path: str | None = None) -> int:
+    from .cli import say  # noqa: PLC0415
+
     fig = run(quick=quick)
-    print(format_table(fig))
+    say(format_table(fig))
     if json_path:
         from .io import write_json  # noqa: PLC0415
 

@@ -42,6 +42,11 @@ class CliError(Exception):
     """A user error: printed as one line, exit status 2."""
 
 
+def say(text: str) -> None:
+    """Command output on stdout: the one place the subcommands' handlers write from."""
+    print(text)
+
+
 def _scene_from_args(args):
     scene = load_scene(args.scene)
     overrides = dict(parse_assignment(s) for s in args.set or [])

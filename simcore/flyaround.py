@@ -381,6 +381,12 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     return fly
 
 
+def _say(text: str) -> None:
+    from .cli import say  # noqa: PLC0415
+
+    say(text)
+
+
 def run_cli(args: argparse.Namespace) -> int:
     """Run ``lmapd flyaround``; return the exit status (0). User errors raise CliError/SceneError.
 
@@ -412,7 +418,7 @@ def run_cli(args: argparse.Namespace) -> int:
         _remove_if_empty(created)
         raise
     d = result.pose.distance_m
-    print(
+    _say(
         f"{len(result.records)} frames, distance {d.min():.1f} / {d.mean():.1f} / {d.max():.1f} m "
         f"(min / mean / max), {int(result.n_points.sum())} points -> {out}/  "
         f"[{time.perf_counter() - start:.1f} s]"

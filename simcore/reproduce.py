@@ -1194,6 +1194,12 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     return rep
 
 
+def _say(text: str) -> None:
+    from .cli import say  # noqa: PLC0415
+
+    say(text)
+
+
 def run_cli(args: argparse.Namespace) -> int:
     """Run ``lmapd reproduce``; return the exit status (0). User errors raise CliError."""
     from .cli import CliError  # noqa: PLC0415  (cli imports this module)
@@ -1211,7 +1217,7 @@ def run_cli(args: argparse.Namespace) -> int:
     if not os.access(out, os.W_OK | os.X_OK):
         raise CliError(f"--out {str(out)!r}: the folder is not writable")
     report = run_reproduction(out, quick=args.quick, seed=args.seed, progress=True)
-    print(
+    _say(
         f"{len(report['items'])} items, {len(report['figures'])} figures and {REPORT_NAME} "
         f"-> {out}/  [{time.perf_counter() - start:.1f} s]"
     )

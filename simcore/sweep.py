@@ -977,6 +977,12 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     return p
 
 
+def _say(text: str) -> None:
+    from .cli import say  # noqa: PLC0415
+
+    say(text)
+
+
 def run_cli(args: argparse.Namespace) -> int:
     """``lmapd sweep``: 0 if every frame is done, 1 if some failed (they are retried next run)."""
     from .cli import CliError  # noqa: PLC0415  (cli imports this module)
@@ -993,5 +999,5 @@ def run_cli(args: argparse.Namespace) -> int:
     report = run_sweep(
         sweep, out, workers=args.workers, scheduler=args.scheduler, clouds=clouds, progress=True
     )
-    print(f"sweep {sweep.name}: {report.describe()}")
+    _say(f"sweep {sweep.name}: {report.describe()}")
     return 0 if report.n_failed == 0 else 1

@@ -186,16 +186,18 @@ def main(out_dir: str, quick: bool = False) -> int:
     fig["summary"] = summary(fig)
     write_json(out / "tradeoff.json", fig)
     plot(fig, out / "tradeoff.png")
-    print(
+    from .cli import say  # noqa: PLC0415
+
+    say(
         "| preset | median time (ms) | speed-up vs reference (min / median) | range RMSE max "
         "(mm) | point count diff max (%) | waveform L2 max |"
     )
-    print("|---|---|---|---|---|---|")
+    say("|---|---|---|---|---|---|")
     for s in fig["summary"]:
-        print(
+        say(
             f"| {s['preset']} | {s['time_s'] * 1e3:.0f} | {s['speedup_min']:.1f} / "
             f"{s['speedup_median']:.1f} | {s['range_rmse_m_max'] * 1e3:.2f} | "
             f"{s['point_count_diff_pct_max']:.2f} | {s['waveform_l2_max']:.4f} |"
         )
-    print(f"-> {out / 'tradeoff.json'}, {out / 'tradeoff.png'}")
+    say(f"-> {out / 'tradeoff.json'}, {out / 'tradeoff.png'}")
     return 0

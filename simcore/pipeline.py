@@ -253,7 +253,7 @@ def stage_hits(scene: Scene, tgt: TargetStage, rays: geometry.RayGrid) -> geomet
     return hits
 
 
-def stage_echo(scene: Scene, tgt: TargetStage, rays: geometry.RayGrid, hits: geometry.Hits):
+def stage_echo(scene: Scene, tgt: TargetStage, hits: geometry.Hits) -> EchoStage:
     model = with_materials(tgt.model, scene.target.materials)
     a = echo.A_PAPER if scene.uses("pulse_constant") else echo.A_FWHM
     shape = echo.pulse_shape(scene.laser.pulse_width_s, a, scene.detector.bandwidth_hz)
@@ -529,7 +529,7 @@ class Pipeline:
         tgt = stage("target", (), lambda: stage_target(scene))
         rays = stage("rays", (), lambda: stage_rays(scene))
         hits = stage("hits", ("target", "rays"), lambda: stage_hits(scene, tgt, rays))
-        ech = stage("echo", ("hits",), lambda: stage_echo(scene, tgt, rays, hits))
+        ech = stage("echo", ("hits",), lambda: stage_echo(scene, tgt, hits))
         rx = stage("receiver", ("echo",), lambda: stage_receiver(scene, ech))
         det = stage("detection", ("receiver",), lambda: stage_detection(scene, ech, rx))
         cloud = stage("cloud", ("detection",), lambda: stage_cloud(rays, ech, rx, det))

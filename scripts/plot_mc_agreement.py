@@ -43,31 +43,12 @@ GATE_M = 1000.0
 
 def i_pk_for_snr(snr, rx):
     """Band-limited peak current with SNR_na (Eq. 18) = snr [A]."""
-    a = rx.chain_noise_factor * 2 * sc.e * rx.bandwidth_hz * rx.gain * rx.excess_noise
-    b = rx.chain_noise_factor * (rx.dark_noise_a**2 + rx.thermal_noise_a**2)
-    snr = np.asarray(snr, dtype=np.float64)
-    return 0.5 * (snr**2 * a + np.sqrt(snr**4 * a**2 + 4 * snr**2 * b))
+    return rx.peak_current_for_snr(snr)
 
 
 def gate(rng, arrivals, weights, rx, tnr, gate_m, n_total=None, **kw):
-    n = len(arrivals)
-    return montecarlo.montecarlo_gate(
-        rng,
-        pixel=np.arange(n),
-        arrivals_s=arrivals,
-        weights_per_j=weights,
-        shape=SHAPE,
-        dt_s=DT,
-        receiver=rx,
-        pulse_energy_j=E,
-        n_pixels_total=n if n_total is None else n_total,
-        gate_center_m=500.0,
-        gate_m=gate_m,
-        tnr=tnr,
-        t_d_s=T_D,
-        k_att=K_ATT,
-        resolution_s=kw.pop("resolution_s", T_T),
-        **kw,
+    return montecarlo.scene_gate(
+        rng, SCENE, rx, arrivals, weights, tnr=tnr, gate_m=gate_m, n_pixels_total=n_total, **kw
     )
 
 

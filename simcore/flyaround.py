@@ -381,19 +381,13 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     return fly
 
 
-def _say(text: str) -> None:
-    from .cli import say  # noqa: PLC0415
-
-    say(text)
-
-
 def run_cli(args: argparse.Namespace) -> int:
     """Run ``lmapd flyaround``; return the exit status (0). User errors raise CliError/SceneError.
 
     Everything is checked (times, scene, output folder) before the first frame is imaged; a
     folder this command created is removed again if the run fails before writing into it.
     """
-    from .cli import CliError  # noqa: PLC0415  (cli imports this module)
+    from .cli import CliError, say  # noqa: PLC0415  (cli imports this module)
 
     start = time.perf_counter()
     times_s = _cli_times(args.interval_s, args.duration_s, CliError)
@@ -418,7 +412,7 @@ def run_cli(args: argparse.Namespace) -> int:
         _remove_if_empty(created)
         raise
     d = result.pose.distance_m
-    _say(
+    say(
         f"{len(result.records)} frames, distance {d.min():.1f} / {d.mean():.1f} / {d.max():.1f} m "
         f"(min / mean / max), {int(result.n_points.sum())} points -> {out}/  "
         f"[{time.perf_counter() - start:.1f} s]"

@@ -59,8 +59,9 @@ from scipy import constants as sc
 from scipy import signal
 
 from .detection import Outliers
-from .echo import A_FWHM, PulseShape, band_limit_sigma_s
+from .echo import A_FWHM, PulseShape, band_limit_sigma_s, default_time_step_s, pulse_shape
 from .receiver import Q_E, ReceiverModel
+from .timing import cfd_delay_s
 
 C = sc.c  # speed of light [m/s] (exact)
 KERNEL_HALF_WIDTH_SIGMA = 6.0  # h_B truncated at +-6 sigma_h: 2e-9 of its area is lost
@@ -946,3 +947,42 @@ def cfd_sigma_shot_aware_m(
     t1, t2 = t_star - t_d_s, t_star
     var = cov(t1, t1) + k_att**2 * cov(t2, t2) - 2 * k_att * cov(t1, t2)
     return float(0.5 * C * np.sqrt(var) / abs(slope))
+
+
+def scene_gate(
+    rng: np.random.Generator,
+    scene,
+    receiver: ReceiverModel,
+    arrivals_s,
+    weights_per_j,
+    *,
+    tnr: float,
+    gate_m: float,
+    n_pixels_total: int | None = None,
+    **options,
+) -> McResult:
+    """:func:`montecarlo_gate` for synthetic echoes, its pulse, band limit, CFD, timing and gate
+    centre (the target distance) taken from ``scene``; pixels are numbered 0..n-1. ``options``
+    pass on (holdoff_s, noise, arming, first_stop, max_bytes, n_threads, or resolution_s to
+    override the scene's)."""
+    tau, b_hz = scene.laser.pulse_width_s, scene.detector.bandwidth_hz
+    shape = pulse_shape(tau, A_FWHM, b_hz)
+    n = len(arrivals_s)
+    return montecarlo_gate(
+        rng,
+        pixel=np.arange(n),
+        arrivals_s=arrivals_s,
+        weights_per_j=weights_per_j,
+        shape=shape,
+        dt_s=default_time_step_s(tau, b_hz),
+        receiver=receiver,
+        pulse_energy_j=scene.laser.pulse_energy_j,
+        n_pixels_total=n if n_pixels_total is None else n_pixels_total,
+        gate_center_m=scene.pose.distance_m,
+        gate_m=gate_m,
+        tnr=tnr,
+        t_d_s=cfd_delay_s(shape),
+        k_att=scene.timing.cfd_fraction,
+        resolution_s=options.pop("resolution_s", scene.timing.resolution_s),
+        **options,
+    )

@@ -87,6 +87,14 @@ class ReceiverModel:
         """Eq. 18: SNR after the amplifier chain, SNR_apd / sqrt(F_chain), capped at snr_max."""
         return np.minimum(self.snr_apd(current_a) / np.sqrt(self.chain_noise_factor), self.snr_max)
 
+    def peak_current_for_snr(self, snr):
+        """The band-limited peak current [A] whose SNR (Eq. 18) is ``snr``: the positive root of
+        i^2 = SNR^2 F_chain (2 q B M F i + i_nd^2 + i_nt^2) (the inverse of :meth:`snr`)."""
+        a = self.chain_noise_factor * 2.0 * Q_E * self.bandwidth_hz * self.gain * self.excess_noise
+        b = self.chain_noise_factor * (self.dark_noise_a**2 + self.thermal_noise_a**2)
+        s2 = np.asarray(snr, dtype=np.float64) ** 2
+        return 0.5 * (s2 * a + np.sqrt(s2 * s2 * a * a + 4.0 * s2 * b))
+
     def sigma_peak_a(self, current_a):
         """Noise at the echo peak (shot + dark + thermal, through the chain) [A rms] (Eq. 27)."""
         i = np.maximum(np.asarray(current_a, dtype=np.float64), 0.0)

@@ -501,15 +501,6 @@ def _mc_tnr_grid(s: ReproduceSettings) -> np.ndarray:
     return np.arange(2.0, 12.0 + 1e-9, s.mc_tnr_step)
 
 
-def _peak_current_for_snr(snr, rx: receiver.ReceiverModel):
-    """Band-limited peak current [A] whose SNR_na (Eq. 18) is ``snr``: the positive root of
-    i^2 = SNR^2 F_chain (2 q B M F i + i_nd^2 + i_nt^2)."""
-    a = rx.chain_noise_factor * 2.0 * sc.e * rx.bandwidth_hz * rx.gain * rx.excess_noise
-    b = rx.chain_noise_factor * (rx.dark_noise_a**2 + rx.thermal_noise_a**2)
-    s2 = np.asarray(snr, dtype=np.float64) ** 2
-    return 0.5 * (s2 * a + np.sqrt(s2 * s2 * a * a + 4.0 * s2 * b))
-
-
 def _item_detection(run: _Run) -> dict[str, Any]:
     from . import montecarlo  # noqa: PLC0415  (only for this item)
 
@@ -517,34 +508,18 @@ def _item_detection(run: _Run) -> dict[str, Any]:
     scene = run.scene()
     rx = receiver.receiver_model(scene.detector, scene.amplifiers, scene.laser.wavelength_m)
     shape = echo.pulse_shape(scene.laser.pulse_width_s, echo.A_FWHM, scene.detector.bandwidth_hz)
-    dt = echo.default_time_step_s(scene.laser.pulse_width_s, scene.detector.bandwidth_hz)
-    t_d = timing.cfd_delay_s(shape)
     energy = scene.laser.pulse_energy_j
     b_hz = scene.detector.bandwidth_hz
     distance = scene.pose.distance_m
 
     def gate(rng, arrivals, weights, n_total, tnr, gate_m):
-        return montecarlo.montecarlo_gate(
-            rng,
-            pixel=np.arange(len(arrivals)),
-            arrivals_s=arrivals,
-            weights_per_j=weights,
-            shape=shape,
-            dt_s=dt,
-            receiver=rx,
-            pulse_energy_j=energy,
-            n_pixels_total=n_total,
-            gate_center_m=distance,
-            gate_m=gate_m,
-            tnr=tnr,
-            t_d_s=t_d,
-            k_att=scene.timing.cfd_fraction,
-            resolution_s=scene.timing.resolution_s,
+        return montecarlo.scene_gate(
+            rng, scene, rx, arrivals, weights, tnr=tnr, gate_m=gate_m, n_pixels_total=n_total
         )
 
     # P_d: single-surface pixels of known SNR through the discriminator; a short gate (10 m)
     snrs = np.array(FIG9_SNRS)
-    i_pk = _peak_current_for_snr(snrs, rx)
+    i_pk = rx.peak_current_for_snr(snrs)
     n_each = s.mc_pd_trials
     tnr_mc = _mc_tnr_grid(s)
     pd_mc = np.zeros((len(snrs), len(tnr_mc)))
@@ -1194,15 +1169,9 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     return rep
 
 
-def _say(text: str) -> None:
-    from .cli import say  # noqa: PLC0415
-
-    say(text)
-
-
 def run_cli(args: argparse.Namespace) -> int:
     """Run ``lmapd reproduce``; return the exit status (0). User errors raise CliError."""
-    from .cli import CliError  # noqa: PLC0415  (cli imports this module)
+    from .cli import CliError, say  # noqa: PLC0415  (cli imports this module)
 
     start = time.perf_counter()
     if args.seed < 0:
@@ -1217,7 +1186,7 @@ def run_cli(args: argparse.Namespace) -> int:
     if not os.access(out, os.W_OK | os.X_OK):
         raise CliError(f"--out {str(out)!r}: the folder is not writable")
     report = run_reproduction(out, quick=args.quick, seed=args.seed, progress=True)
-    _say(
+    say(
         f"{len(report['items'])} items, {len(report['figures'])} figures and {REPORT_NAME} "
         f"-> {out}/  [{time.perf_counter() - start:.1f} s]"
     )

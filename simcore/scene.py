@@ -530,6 +530,14 @@ def builtin_scenes() -> list[str]:
     return sorted(p.stem for p in SCENES_DIR.glob("*.toml"))
 
 
+def read_toml(path: Path, error: type[SceneError] = SceneError) -> dict[str, Any]:
+    """The tables of a TOML file; ``error`` (a SceneError) names the file if it is not TOML."""
+    try:
+        return tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise error(f"{path}: not valid TOML: {exc}") from None
+
+
 def load_scene(source: str | Path | None = None) -> Scene:
     """Load a scene: None or a built-in name (``paper``) or a path to a TOML file."""
     if source is None:
@@ -540,10 +548,7 @@ def load_scene(source: str | Path | None = None) -> Scene:
     if not path.exists():
         names = ", ".join(builtin_scenes())
         raise SceneError(f"scene file not found: {source} (built-in scenes: {names})")
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise SceneError(f"{path}: not valid TOML: {exc}") from None
+    data = read_toml(path)
     data.setdefault("name", path.stem)
     scene = scene_from_dict(data)
     # a relative mesh path in a scene file is relative to that file

@@ -57,7 +57,6 @@ import os
 import sys
 import threading
 import time
-import tomllib
 import uuid
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
@@ -72,7 +71,16 @@ from .materials import MATERIAL_NAMES
 from .parallel import set_threads
 from .pipeline import Pipeline, Result
 from .pointcloud import PointCloud
-from .scene import QUICK, SECTIONS, Scene, SceneError, dump_scene, load_scene, with_overrides
+from .scene import (
+    QUICK,
+    SECTIONS,
+    Scene,
+    SceneError,
+    dump_scene,
+    load_scene,
+    read_toml,
+    with_overrides,
+)
 from .target import TargetError, load_target, with_materials
 
 __all__ = [
@@ -206,10 +214,7 @@ def load_sweep(path: str | Path) -> Sweep:
     path = Path(path)
     if not path.is_file():
         raise SweepError(f"sweep file not found: {path}")
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise SweepError(f"{path}: not valid TOML: {exc}") from None
+    data = read_toml(path, SweepError)
     data.setdefault("name", path.stem)
     return sweep_from_dict(data, base_dir=path.parent, source=str(path))
 
@@ -977,15 +982,9 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     return p
 
 
-def _say(text: str) -> None:
-    from .cli import say  # noqa: PLC0415
-
-    say(text)
-
-
 def run_cli(args: argparse.Namespace) -> int:
     """``lmapd sweep``: 0 if every frame is done, 1 if some failed (they are retried next run)."""
-    from .cli import CliError  # noqa: PLC0415  (cli imports this module)
+    from .cli import CliError, say  # noqa: PLC0415  (cli imports this module)
 
     if args.scheduler and args.workers is not None:
         raise CliError("--workers sizes the local cluster; with --scheduler give no --workers")
@@ -999,5 +998,5 @@ def run_cli(args: argparse.Namespace) -> int:
     report = run_sweep(
         sweep, out, workers=args.workers, scheduler=args.scheduler, clouds=clouds, progress=True
     )
-    _say(f"sweep {sweep.name}: {report.describe()}")
+    say(f"sweep {sweep.name}: {report.describe()}")
     return 0 if report.n_failed == 0 else 1

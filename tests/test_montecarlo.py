@@ -37,12 +37,8 @@ MAD_REL_SD = 1.1664  # sd of the MAD sigma estimate is 1.1664 sigma / sqrt(n) (e
 
 
 def i_pk_for_snr(snr, rx=RX):
-    """Band-limited peak current whose SNR_na (Eq. 18) is ``snr``: the root of
-    i^2 = SNR^2 F_chain (2 q B M F i + i_nd^2 + i_nt^2)."""
-    a = rx.chain_noise_factor * 2 * sc.e * rx.bandwidth_hz * rx.gain * rx.excess_noise
-    b = rx.chain_noise_factor * (rx.dark_noise_a**2 + rx.thermal_noise_a**2)
-    snr = np.asarray(snr, dtype=np.float64)
-    return 0.5 * (snr**2 * a + np.sqrt(snr**4 * a**2 + 4 * snr**2 * b))
+    """Band-limited peak current whose SNR_na (Eq. 18) is ``snr``."""
+    return rx.peak_current_for_snr(snr)
 
 
 def single_surface(snrs, n_each, rng, rx=RX, range_m=(498.0, 502.0)):
@@ -54,23 +50,15 @@ def single_surface(snrs, n_each, rng, rx=RX, range_m=(498.0, 502.0)):
 
 
 def run_gate(arrivals, weights, rx=RX, tnr=3.0, gate_m=10.0, seed=1, n_total=None, **kw):
-    n = len(arrivals)
-    return montecarlo.montecarlo_gate(
+    return montecarlo.scene_gate(
         np.random.default_rng(seed),
-        pixel=np.arange(n),
-        arrivals_s=arrivals,
-        weights_per_j=weights,
-        shape=SHAPE,
-        dt_s=DT,
-        receiver=rx,
-        pulse_energy_j=E,
-        n_pixels_total=n if n_total is None else n_total,
-        gate_center_m=500.0,
-        gate_m=gate_m,
+        SCENE,
+        rx,
+        arrivals,
+        weights,
         tnr=tnr,
-        t_d_s=T_D,
-        k_att=K_ATT,
-        resolution_s=kw.pop("resolution_s", T_T),
+        gate_m=gate_m,
+        n_pixels_total=n_total,
         **kw,
     )
 

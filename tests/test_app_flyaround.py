@@ -5,10 +5,10 @@ dropped."""
 from __future__ import annotations
 
 import threading
-import time
 
 import numpy as np
 import pytest
+from app_helpers import change, settle
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -55,19 +55,6 @@ def app(model):
     settle(lmapd)
     yield lmapd
     lmapd.logic.runner.close()
-
-
-def settle(app: LmapdApp, timeout_s: float = 60.0) -> None:
-    assert app.logic.runner.wait_idle(timeout_s)
-    deadline = time.monotonic() + timeout_s
-    while app.state.busy and time.monotonic() < deadline:
-        time.sleep(0.01)
-
-
-def change(app: LmapdApp, **values) -> None:
-    with app.state:
-        app.state.update(values)
-    settle(app)
 
 
 def frame_scene(app: LmapdApp) -> simcore.Scene:

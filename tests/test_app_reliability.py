@@ -19,6 +19,7 @@ import msgpack
 import numpy as np
 import pytest
 import trimesh
+from app_helpers import change, settle
 
 import simcore
 from app.engine import Engine
@@ -46,19 +47,6 @@ def app(engine):
     yield lmapd
     lmapd.logic.runner.close()
     lmapd.uploads.files.cleanup()
-
-
-def settle(app: LmapdApp, timeout_s: float = 30.0) -> None:
-    assert app.logic.runner.wait_idle(timeout_s)
-    deadline = time.monotonic() + timeout_s
-    while app.state.busy and time.monotonic() < deadline:
-        time.sleep(0.01)
-
-
-def change(app: LmapdApp, **values) -> None:
-    with app.state:
-        app.state.update(values)
-    settle(app)
 
 
 def assert_healthy(app: LmapdApp) -> None:

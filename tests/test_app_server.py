@@ -9,6 +9,7 @@ import threading
 import time
 
 import pytest
+from app_helpers import change, settle
 
 import simcore
 from app.engine import Engine
@@ -32,22 +33,6 @@ def app(engine):
     settle(lmapd)
     yield lmapd
     lmapd.logic.runner.close()
-
-
-def settle(app: LmapdApp, timeout_s: float = 30.0) -> None:
-    assert app.logic.runner.wait_idle(timeout_s)
-    deadline = time.monotonic() + timeout_s
-    while app.state.busy and time.monotonic() < deadline:
-        time.sleep(0.01)
-
-
-def change(app: LmapdApp, wait_busy: bool = True, **values) -> None:
-    with app.state:
-        app.state.update(values)
-    if wait_busy:
-        settle(app)
-    else:
-        assert app.logic.runner.wait_idle(30)
 
 
 def test_the_first_frame_fills_every_view(app):

@@ -13,6 +13,7 @@ from app.logic.scene_map import preset_text
 from app.state import PRESET_CHOICES, SPECS, SUBRAY_CHOICES, ControlSpec
 from app.ui import flyaround
 from app.ui.upload import upload_panel
+from app.ui.widgets import labelled_toggle
 
 SLOW_RAYS = 2e6  # rays per flash above which the page warns that updates take seconds
 
@@ -100,19 +101,13 @@ def fidelity_choice() -> None:
                 v_if=f"preset === '{name}'",
                 classes=f"text-caption hint preset-hint preset-hint-{name}",
             )
-    with html.Div(v_if="preset === 'custom'", classes="control control-subrays"):
-        html.Div("Custom: sub-rays per pixel", classes="control-label text-body-2")
-        with v3.VBtnToggle(
-            model_value=("subrays",),
-            update_modelValue="subrays = $event",
-            mandatory=True,
-            density="compact",
-            color="primary",
-            variant="outlined",
-            divided=True,
-        ):
-            for n in SUBRAY_CHOICES:
-                v3.VBtn(str(n), value=n, size="small", classes=f"subrays-{n}")
+    labelled_toggle(
+        "Custom: sub-rays per pixel",
+        "subrays",
+        [(str(n), n, f"subrays-{n}") for n in SUBRAY_CHOICES],
+        div_classes="control control-subrays",
+        v_if="preset === 'custom'",
+    )
     html.Div(
         f"{{{{ (pixels * pixels * {subrays} / 1e6).toFixed(1) }}}} M rays per flash: "
         "expect seconds per update",
@@ -166,20 +161,11 @@ def materials_panel() -> None:
 
 
 def display_choices() -> None:
-    with html.Div(classes="control"):
-        html.Div("Colour points by", classes="control-label text-body-2")
-        with v3.VBtnToggle(
-            model_value=("color_by",),
-            update_modelValue="color_by = $event",
-            mandatory=True,
-            density="compact",
-            color="primary",
-            variant="outlined",
-            divided=True,
-        ):
-            v3.VBtn("Range", value="range", size="small")
-            v3.VBtn("SNR", value="snr", size="small")
-            v3.VBtn("Outlier flag", value="outlier", size="small")
+    labelled_toggle(
+        "Colour points by",
+        "color_by",
+        [("Range", "range", ""), ("SNR", "snr", ""), ("Outlier flag", "outlier", "")],
+    )
 
 
 def section(title: str) -> None:

@@ -6,6 +6,8 @@ from __future__ import annotations
 from trame.widgets import html
 from trame.widgets import vuetify3 as v3
 
+from app.ui.widgets import button_toggle
+
 FOV_HINT = (
     "Pose from the two orbits of Table 3 (lidar tracking the target). At about 200 m the 30 mrad "
     "field of view covers only about 6 m of the 15 m MRO: the views show part of the target, as "
@@ -16,18 +18,14 @@ FOV_HINT = (
 def mode_switch() -> None:
     with html.Div(classes="control control-mode"):
         html.Div("Mode", classes="control-label text-body-2")
-        with v3.VBtnToggle(
-            model_value=("mode",),
-            update_modelValue="mode = $event",
-            mandatory=True,
-            density="compact",
-            color="primary",
-            variant="outlined",
-            divided=True,
+        button_toggle(
+            "mode",
+            [
+                ("Single frame", "single", "mode-single"),
+                ("Fly-around", "flyaround", "mode-flyaround"),
+            ],
             classes="mode-toggle",
-        ):
-            v3.VBtn("Single frame", value="single", size="small", classes="mode-single")
-            v3.VBtn("Fly-around", value="flyaround", size="small", classes="mode-flyaround")
+        )
 
 
 def flyaround_panel() -> None:

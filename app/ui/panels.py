@@ -6,6 +6,8 @@ from __future__ import annotations
 from trame.widgets import html, plotly
 from trame.widgets import vuetify3 as v3
 
+from app.ui.widgets import button_toggle
+
 # Pixel (row, col) under the mouse from the click position on the n x n image.
 PIXEL_CLICK = (
     "trigger('pixel_click', ["
@@ -25,18 +27,12 @@ def array_card() -> None:
         with v3.VCardTitle(classes="card-title d-flex align-center flex-wrap"):
             html.Span("Detector array {{ array_image.pixels }} × {{ array_image.pixels }}")
             v3.VSpacer()
-            with v3.VBtnToggle(
-                model_value=("image_kind",),
-                update_modelValue="image_kind = $event",
-                mandatory=True,
-                density="compact",
-                variant="outlined",
-                divided=True,
-                color="primary",
+            button_toggle(
+                "image_kind",
+                [("Range", "range", ""), ("Peak power", "peak_power", "")],
+                size="x-small",
                 classes="image-kind",
-            ):
-                v3.VBtn("Range", value="range", size="x-small")
-                v3.VBtn("Peak power", value="peak_power", size="x-small")
+            )
         html.Div(
             "Click a pixel to see its echo; shift-click adds more.",
             classes="hint text-caption px-4",

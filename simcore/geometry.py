@@ -146,6 +146,8 @@ class RayGrid:
         Unit direction of each sub-ray, pixel-major (flat pixel index = row * pixels + col).
     pixel_directions : (pixels**2, 3) float64
         Unit direction u_pix of each pixel centre (points are placed along it).
+    corner_directions : ((pixels + 1)**2, 3) float64
+        Unit directions through the pixel corners, row-major (for ``Fidelity.probe_corners``).
     """
 
     pixels: int
@@ -153,14 +155,17 @@ class RayGrid:
     ifov_rad: float
     directions: np.ndarray
     pixel_directions: np.ndarray
+    corner_directions: np.ndarray
+    fov_rad: float
 
 
 def ray_grid(pixels: int, fov_rad: float, subrays: int) -> RayGrid:
     dirs = subray_directions(pixels, fov_rad, subrays)
     centre = subray_directions(pixels, fov_rad, 1)[:, 0]
-    for a in (dirs, centre):
+    corners = corner_directions(pixels, fov_rad)
+    for a in (dirs, centre, corners):
         a.setflags(write=False)
-    return RayGrid(pixels, dirs.shape[1], fov_rad / pixels, dirs, centre)
+    return RayGrid(pixels, dirs.shape[1], fov_rad / pixels, dirs, centre, corners, fov_rad)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -196,12 +201,14 @@ class RayCaster:
         n = len(directions_t)
         starts = (origins_t[None, :] + start_m * directions_t).astype(np.float32)
         dirs32 = directions_t.astype(np.float32)
-        chunks = np.array_split(np.arange(n), parallel.threads()) if n > 4096 else [np.arange(n)]
+        parts = parallel.threads() if n > 4096 else 1
+        bounds = np.linspace(0, n, parts + 1).astype(int)
+        chunks = [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
 
-        def run(idx):
-            if len(idx) == 0:
+        def run(part):
+            if part.stop == part.start:
                 return {"tfar": np.zeros(0, np.float32), "primID": np.zeros(0, np.int32)}
-            return self._scene.run(starts[idx], dirs32[idx], output=1)
+            return self._scene.run(starts[part], dirs32[part], output=1)
 
         results = parallel.map_threads(run, chunks)
         face = np.concatenate([r["primID"] for r in results]).astype(np.int32)
@@ -302,14 +309,22 @@ class Hits:
         return np.unique(np.concatenate(faces))
 
 
-def cast_block(caster: RayCaster, pixel, directions, pose: PoseInSensor) -> HitBlock:
-    """First hits of the sub-rays ``directions`` (n, K, 3, sensor frame) of pixels ``pixel``."""
-    rot_t = pose.rotation.T  # sensor -> target
-    origin_t = -rot_t @ pose.translation_m
-    dirs_s = directions.reshape(-1, 3)
-    dirs_t = dirs_s @ pose.rotation  # (R^T d) for each row
+def cast_ranges(caster: RayCaster, directions_s, pose: PoseInSensor):
+    """First hits of rays from the lidar along ``directions_s`` ((n, 3), sensor frame).
+
+    Returns range_m (n,) [m, inf for a miss], face (n,) [-1 for a miss] and the directions in
+    the target frame (n, 3)."""
+    origin_t = -pose.rotation.T @ pose.translation_m  # the lidar, in the target frame
+    dirs_t = directions_s @ pose.rotation  # R^T d for each row
     start = max(0.0, float(np.linalg.norm(pose.translation_m)) - 1.05 * caster._radius)
     range_m, face = caster.first_hits(origin_t, dirs_t, start)
+    return range_m, face, dirs_t
+
+
+def cast_block(caster: RayCaster, pixel, directions, pose: PoseInSensor) -> HitBlock:
+    """First hits of the sub-rays ``directions`` (n, K, 3, sensor frame) of pixels ``pixel``."""
+    dirs_s = directions.reshape(-1, 3)
+    range_m, face, dirs_t = cast_ranges(caster, dirs_s, pose)
     hit = face >= 0
     cos_t = np.zeros_like(range_m)
     cos_t[hit] = np.abs(np.einsum("ij,ij->i", caster.facet_normals(face[hit]), dirs_t[hit]))
@@ -325,14 +340,48 @@ def cast_block(caster: RayCaster, pixel, directions, pose: PoseInSensor) -> HitB
     )
 
 
-def mixed_pixels(block: HitBlock, pixels: int, step_m: float) -> np.ndarray:
+def corner_directions(pixels: int, fov_rad: float) -> np.ndarray:
+    """((pixels + 1)**2, 3) unit sensor-frame directions through the pixel corners, row-major."""
+    pitch = 2.0 * np.tan(fov_rad / 2.0) / pixels
+    g = (np.arange(pixels + 1) - pixels / 2.0) * pitch
+    return unit_directions(g[None, :], g[:, None]).reshape(-1, 3)
+
+
+@dataclass(frozen=True)
+class CornerSamples:
+    """First hits of the rays through the pixel corners, each (pixels + 1, pixels + 1)."""
+
+    range_m: np.ndarray  # inf for a miss
+    part: np.ndarray  # the hit face's target part, -1 for a miss
+    cos_theta: np.ndarray  # abs(cos) of the incidence angle, 0 for a miss
+
+
+COS_STEP = 0.1  # a change of incidence cosine within a pixel that marks it mixed (a crease)
+
+
+def mixed_pixels(
+    block: HitBlock,
+    pixels: int,
+    step_m: float,
+    corners: CornerSamples | None = None,
+    face_part: np.ndarray | None = None,
+) -> np.ndarray:
     """Flat indices of the pixels a few sub-rays cannot represent.
 
     A pixel is mixed when its sub-rays disagree (some hit, some miss, or their ranges leave a
-    plane fitted to them by more than ``step_m``: tilted planes pass, steps do not), when its hit
-    status differs from a 4-neighbour's (both sides of the silhouette are marked), or when the
+    plane fitted to them by more than ``step_m``: tilted planes pass, steps do not), or when the
     mean-range image has a second difference above ``step_m`` at it (near zero on planes and
     gently curved surfaces; a depth step marks the pixels on both sides of it).
+
+    Without ``corners`` a pixel whose hit status differs from a 4-neighbour's is mixed too (both
+    sides of the silhouette). With ``corners`` (rays through the pixel corners) the corners and
+    the sub-rays are the pixel's samples: it is mixed when they disagree on hit or miss (a straight
+    silhouette edge crosses a square if and only if it separates two of its corners, so this finds
+    the silhouette without its outer ring), on the target part they hit (``face_part`` maps faces
+    to parts; a part boundary may be a material boundary), or on the incidence cosine by more
+    than COS_STEP (a crease), when its corners do not lie on a plane (twist above ``step_m``) or
+    when its mean range leaves the mean of its corners by more than ``step_m`` (a step between
+    samples). Corners halve the gap a thin part can hide in (struts, panel edges seen edge-on).
     """
     hit = block.face >= 0
     any_hit = hit.any(axis=1)
@@ -360,12 +409,15 @@ def mixed_pixels(block: HitBlock, pixels: int, step_m: float) -> np.ndarray:
     ).reshape(pixels, pixels)
     seen = any_hit.reshape(pixels, pixels)
     flag = mixed.reshape(pixels, pixels).copy()
+    if corners is not None:
+        flag |= _corner_flags(block, pixels, step_m, corners, face_part, r_mean, full)
     for axis in (0, 1):
         a_, b_ = [slice(None)] * 2, [slice(None)] * 2
         a_[axis], b_[axis] = slice(None, -1), slice(1, None)
-        differ = seen[tuple(a_)] != seen[tuple(b_)]
-        flag[tuple(a_)] |= differ
-        flag[tuple(b_)] |= differ
+        if corners is None:
+            differ = seen[tuple(a_)] != seen[tuple(b_)]
+            flag[tuple(a_)] |= differ
+            flag[tuple(b_)] |= differ
         lo, mid, hi = [slice(None)] * 2, [slice(None)] * 2, [slice(None)] * 2
         lo[axis], mid[axis], hi[axis] = slice(None, -2), slice(1, -1), slice(2, None)
         with np.errstate(invalid="ignore"):
@@ -377,20 +429,57 @@ def mixed_pixels(block: HitBlock, pixels: int, step_m: float) -> np.ndarray:
     return np.flatnonzero(flag)
 
 
+def _quad(a: np.ndarray) -> np.ndarray:
+    """(4, n, n) the four corner values of each pixel from an (n + 1, n + 1) corner image."""
+    return np.stack((a[:-1, :-1], a[:-1, 1:], a[1:, :-1], a[1:, 1:]))
+
+
+def _corner_flags(block, pixels, step_m, corners, face_part, r_mean, full) -> np.ndarray:
+    """(pixels, pixels) bool: the pixel's corners and sub-rays disagree (see mixed_pixels)."""
+    shape = (block.subrays, pixels, pixels)  # the sub-ray samples, laid out like _quad's
+    c_range = _quad(corners.range_m)
+    c_hit = np.isfinite(c_range)
+    flag = (c_hit.any(axis=0) | ~np.isnan(r_mean)) & ~(c_hit.all(axis=0) & full.reshape(pixels, -1))
+    with np.errstate(invalid="ignore"):  # inf - inf is NaN: compares False
+        twist = np.abs(c_range[0] + c_range[3] - c_range[1] - c_range[2])
+        off = np.abs(r_mean - c_range.mean(axis=0))
+    flag |= (twist > step_m) | (off > step_m)
+    cos = np.concatenate([_quad(corners.cos_theta), block.cos_theta.T.reshape(shape)])
+    flag |= cos.max(axis=0) - cos.min(axis=0) > COS_STEP
+    if face_part is not None:
+        part = np.where(block.face >= 0, face_part[np.maximum(block.face, 0)], -1)
+        parts = np.concatenate([_quad(corners.part), part.T.reshape(shape)])
+        flag |= parts.max(axis=0) != parts.min(axis=0)
+    return flag
+
+
+def probe(caster: RayCaster, rays: RayGrid, pose: PoseInSensor) -> CornerSamples:
+    """Cast the rays through the pixel corners."""
+    range_m, face, dirs_t = cast_ranges(caster, rays.corner_directions, pose)
+    hit = face >= 0
+    cos_t = np.zeros_like(range_m)
+    cos_t[hit] = np.abs(np.einsum("ij,ij->i", caster.facet_normals(face[hit]), dirs_t[hit]))
+    part = np.where(hit, caster.model.face_part[np.maximum(face, 0)], -1)
+    n1 = rays.pixels + 1
+    return CornerSamples(range_m.reshape(n1, n1), part.reshape(n1, n1), cos_t.reshape(n1, n1))
+
+
 def cast(
     caster: RayCaster,
     rays: RayGrid,
     pose: PoseInSensor,
-    fov_rad: float = 0.0,
     refine_subrays: int = 0,
     refine_step_m: float = 0.02,
+    probe_corners: bool = False,
 ) -> Hits:
     """First hit of every sub-ray of the array for the target in ``pose``; with
-    ``refine_subrays`` > the base count, the mixed pixels are cast again that densely."""
+    ``refine_subrays`` > the base count, the mixed pixels are cast again that densely (found with
+    rays through the pixel corners too if ``probe_corners``)."""
     base = cast_block(caster, np.arange(rays.pixels**2), rays.directions, pose)
     refined = None
     if refine_subrays > rays.subrays:
-        which = mixed_pixels(base, rays.pixels, refine_step_m)
-        dirs = subray_directions(rays.pixels, fov_rad, refine_subrays, which)
+        corners = probe(caster, rays, pose) if probe_corners else None
+        which = mixed_pixels(base, rays.pixels, refine_step_m, corners, caster.model.face_part)
+        dirs = subray_directions(rays.pixels, rays.fov_rad, refine_subrays, which)
         refined = cast_block(caster, which, dirs, pose)
     return Hits(base, refined, pose)

@@ -245,7 +245,7 @@ def stage_hits(scene: Scene, tgt: TargetStage, rays: geometry.RayGrid) -> geomet
     pose = geometry.target_pose(scene.pose, tgt.model.mesh.extents, tgt.model.body_from_mesh)
     fid = scene.fidelity
     hits = geometry.cast(
-        tgt.caster, rays, pose, scene.receive.fov_rad, fid.refine_subrays, fid.refine_step_m
+        tgt.caster, rays, pose, fid.refine_subrays, fid.refine_step_m, fid.probe_corners
     )
     for block in (hits.base, hits.refined):
         if block is not None:
@@ -460,6 +460,7 @@ def _deps(scene: Scene) -> dict[str, tuple]:
             scene.receive.fov_rad,
             scene.fidelity.refine_subrays,
             scene.fidelity.refine_step_m,
+            scene.fidelity.probe_corners,
         ),
         "echo": (
             lz.pulse_width_s,

@@ -179,6 +179,12 @@ class Fidelity:
         "depth step (range second difference) that marks a mixed pixel",
         lo_open=True,
     )
+    probe_corners: bool = _f(
+        False,
+        "-",
+        doc="with refinement: also cast a ray through every pixel corner to find mixed pixels "
+        "(thin parts between pixel centres; the silhouette without its outer ring)",
+    )
     noise_model: str = _f(
         "statistical",
         "-",
@@ -210,12 +216,14 @@ PRESETS: dict[str, dict[str, Any]] = {
         "fidelity.subrays": 1,
         "fidelity.refine_subrays": 64,
         "fidelity.refine_step_m": 0.05,
+        "fidelity.probe_corners": True,
         "fidelity.time_step_s": 0.0,
     },
     "balanced": {
         "fidelity.subrays": 4,
         "fidelity.refine_subrays": 64,
         "fidelity.refine_step_m": 0.02,
+        "fidelity.probe_corners": False,
         "fidelity.time_step_s": 0.0,
     },
     # every pixel sampled by 8 x 8 sub-rays, a finer time grid
@@ -223,6 +231,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "fidelity.subrays": 64,
         "fidelity.refine_subrays": 0,
         "fidelity.refine_step_m": 0.02,
+        "fidelity.probe_corners": False,
         "fidelity.time_step_s": 1e-10,
     },
 }

@@ -3,6 +3,10 @@
 Default: 2 (this project's machines have 2 cores; embreex and numpy release the GIL). Where frames
 already run side by side, one per core (a Dask worker per core), set 1 to avoid oversubscription.
 Results never depend on it.
+
+A frame runs with the BLAS libraries single-threaded (:func:`blas_serial`): OpenBLAS's threads
+spin-wait after each call, holding the cores the frame's own threads need (measured: a 2-thread ray
+cast ran no faster than one thread after a single small matrix product).
 """
 
 from __future__ import annotations
@@ -12,6 +16,8 @@ import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import TypeVar
+
+import threadpoolctl
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -51,3 +57,15 @@ def map_threads(fn: Callable[[T], R], items: Sequence[T]) -> list[R]:
             _pool_size = _threads
         pool = _pool
     return list(pool.map(fn, items))
+
+
+_controller: threadpoolctl.ThreadpoolController | None = None
+
+
+def blas_serial():
+    """Context manager: the loaded BLAS libraries run single-threaded inside it."""
+    global _controller
+    with _pool_lock:
+        if _controller is None:  # found once, after numpy and scipy have loaded their BLAS
+            _controller = threadpoolctl.ThreadpoolController()
+    return _controller.limit(limits=1, user_api="blas")

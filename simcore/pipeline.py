@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from scipy import constants as sc
 
-from . import detection, echo, geometry, materials, receiver, timing
+from . import detection, echo, geometry, materials, parallel, receiver, timing
 from .pointcloud import PointCloud, assemble_cloud
 from .scene import Scene, SceneError, with_overrides
 from .target import TargetModel, load_target, with_materials
@@ -297,18 +297,20 @@ def stage_echo(scene: Scene, tgt: TargetStage, hits: geometry.Hits) -> EchoStage
 
 def _echo_block(scene, model, block: geometry.HitBlock, shape, dt, t_d) -> dict[str, np.ndarray]:
     """Echo features of one block of pixels sampled with the same number of sub-rays."""
+    rows = np.flatnonzero((block.face >= 0).any(axis=1))  # pixels that see the target
+    face, range_m, cos_t = block.face[rows], block.range_m[rows], block.cos_theta[rows]
     lit_gain = echo.illumination_gain(
-        block.directions, scene.illumination_angle_rad, scene.transmit.illumination
+        block.directions[rows], scene.illumination_angle_rad, scene.transmit.illumination
     )
-    face = block.face
     hit = face >= 0
-    params = materials.parameter_table(materials.MATERIAL_NAMES)
-    mat = np.where(hit, model.face_material_library[np.where(hit, face, 0)], -1)
-    A, B, m, s = (params[np.maximum(mat, 0), j] for j in range(4))
-    rho = np.where(hit, materials.brdf(block.cos_theta, A, B, m, s), 0.0)
+    mat = np.full(face.shape, -1, np.int64)
+    mat[hit] = model.face_material_library[face[hit]]
+    params = materials.parameter_table(materials.MATERIAL_NAMES)[mat[hit]]
+    rho = np.zeros(face.shape)
+    rho[hit] = materials.brdf(cos_t[hit], *params.T)
     weights = echo.element_weights(
-        block.range_m,
-        block.cos_theta,
+        range_m,
+        cos_t,
         rho,
         lit_gain,
         aperture_area_m2=np.pi * scene.receive.aperture_diameter_m**2 / 4.0,
@@ -319,13 +321,19 @@ def _echo_block(scene, model, block: geometry.HitBlock, shape, dt, t_d) -> dict[
         paper_4pi=scene.uses("eq30_4pi"),
     )
     keep = (weights > 0).any(axis=1)
-    weights, face, mat = weights[keep], face[keep], mat[keep]
+    weights, face, mat, rows = weights[keep], face[keep], mat[keep], rows[keep]
     if scene.uses("eq29_one_way"):  # relief along the boresight, one way (the paper's print)
         distance = scene.pose.distance_m
-        arrivals = 2.0 * distance / C + (block.depth_m[keep] - distance) / C
+        arrivals = 2.0 * distance / C + (block.depth_m[rows] - distance) / C
     else:
-        arrivals = 2.0 * block.range_m[keep] / C
+        arrivals = 2.0 * range_m[keep] / C
     arrivals = np.where(weights > 0, arrivals, 0.0)
+    strongest = np.argmax(weights, axis=1)[:, None]
+    material_id = np.take_along_axis(mat, strongest, axis=1)[:, 0]
+    facet_id = np.take_along_axis(face, strongest, axis=1)[:, 0]
+    window = scene.fidelity.merge_window * timing.rise_time_10_90_s(shape)
+    if window > 0 and block.subrays > 2:
+        arrivals, weights = echo.merge_elements(arrivals, weights, window)
     feats = echo.echo_features(
         shape,
         arrivals,
@@ -335,18 +343,16 @@ def _echo_block(scene, model, block: geometry.HitBlock, shape, dt, t_d) -> dict[
         scene.timing.cfd_fraction,
         raw_peak=scene.uses("unfiltered_peak"),
     )
-    strongest = np.argmax(weights, axis=1)
-    rows = np.arange(len(weights))
     return {
-        "pixel": block.pixel[keep],
+        "pixel": block.pixel[rows],
         "arrivals": arrivals,
         "weights": weights,
         "peak": feats.peak_w_per_j,
         "t_half": feats.t_half_s,
         "slope": feats.cfd_slope_per_s,
         "peak_raw": feats.peak_raw_w_per_j if feats.peak_raw_w_per_j is not None else None,
-        "material_id": mat[rows, strongest].astype(np.int32),
-        "facet_id": face[rows, strongest].astype(np.int32),
+        "material_id": material_id.astype(np.int32),
+        "facet_id": facet_id.astype(np.int32),
     }
 
 
@@ -470,6 +476,7 @@ def _deps(scene: Scene) -> dict[str, tuple]:
             scene.target.materials,
             det.bandwidth_hz,
             scene.fidelity.time_step_s,
+            scene.fidelity.merge_window,
             scene.timing.cfd_fraction,
             scene.timing.cfd_delay_s,
             forms("pulse_constant", "eq30_4pi", "eq29_one_way", "unfiltered_peak"),
@@ -527,13 +534,14 @@ class Pipeline:
             self._cache[name] = (key, value)
             return value
 
-        tgt = stage("target", (), lambda: stage_target(scene))
-        rays = stage("rays", (), lambda: stage_rays(scene))
-        hits = stage("hits", ("target", "rays"), lambda: stage_hits(scene, tgt, rays))
-        ech = stage("echo", ("hits",), lambda: stage_echo(scene, tgt, hits))
-        rx = stage("receiver", ("echo",), lambda: stage_receiver(scene, ech))
-        det = stage("detection", ("receiver",), lambda: stage_detection(scene, ech, rx))
-        cloud = stage("cloud", ("detection",), lambda: stage_cloud(rays, ech, rx, det))
+        with parallel.blas_serial():
+            tgt = stage("target", (), lambda: stage_target(scene))
+            rays = stage("rays", (), lambda: stage_rays(scene))
+            hits = stage("hits", ("target", "rays"), lambda: stage_hits(scene, tgt, rays))
+            ech = stage("echo", ("hits",), lambda: stage_echo(scene, tgt, hits))
+            rx = stage("receiver", ("echo",), lambda: stage_receiver(scene, ech))
+            det = stage("detection", ("receiver",), lambda: stage_detection(scene, ech, rx))
+            cloud = stage("cloud", ("detection",), lambda: stage_cloud(rays, ech, rx, det))
         return Result(scene, cloud, ech, rx, det, hits, rays, timings)
 
 

@@ -179,6 +179,14 @@ class Fidelity:
         "depth step (range second difference) that marks a mixed pixel",
         lo_open=True,
     )
+    merge_window: float = _f(
+        0.0,
+        "1",
+        0.0,
+        1.0,
+        "sub-ray echoes arriving within this fraction of the band-limited pulse's 10-90 % rise "
+        "time merge into two with the same energy, mean delay, spread and skew (0: never)",
+    )
     probe_corners: bool = _f(
         False,
         "-",
@@ -217,6 +225,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "fidelity.refine_subrays": 64,
         "fidelity.refine_step_m": 0.05,
         "fidelity.probe_corners": True,
+        "fidelity.merge_window": 0.25,
         "fidelity.time_step_s": 0.0,
     },
     "balanced": {
@@ -224,6 +233,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "fidelity.refine_subrays": 64,
         "fidelity.refine_step_m": 0.02,
         "fidelity.probe_corners": False,
+        "fidelity.merge_window": 0.0,
         "fidelity.time_step_s": 0.0,
     },
     # every pixel sampled by 8 x 8 sub-rays, a finer time grid
@@ -232,6 +242,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "fidelity.refine_subrays": 0,
         "fidelity.refine_step_m": 0.02,
         "fidelity.probe_corners": False,
+        "fidelity.merge_window": 0.0,
         "fidelity.time_step_s": 1e-10,
     },
 }

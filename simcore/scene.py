@@ -233,7 +233,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "fidelity.refine_subrays": 64,
         "fidelity.refine_step_m": 0.02,
         "fidelity.probe_corners": False,
-        "fidelity.merge_window": 0.0,
+        "fidelity.merge_window": 0.25,
         "fidelity.time_step_s": 0.0,
     },
     # every pixel sampled by 8 x 8 sub-rays, a finer time grid

@@ -490,17 +490,16 @@ def merge_elements(arrivals_s, weights, window_s: float):
         n_seg = int(seg_of_key.max()) + 1
         seg = seg_of_key[inverse]
     dest = row * n_seg + seg
-    wu = w * u
-    m0, m1, m2, m3 = (
-        np.bincount(dest, v, minlength=n * n_seg) for v in (w, wu, wu * u, wu * u * u)
-    )
+    m0 = np.bincount(dest, w, minlength=n * n_seg)
+    safe = np.where(m0 > 0, m0, 1.0)
+    mu = np.bincount(dest, w * u, minlength=n * n_seg) / safe
+    d = u - mu[dest]  # central moments from deviations: no cancellation
+    wd2 = w * d * d
+    sd = np.sqrt(np.bincount(dest, wd2, minlength=n * n_seg) / safe)
+    c3 = np.bincount(dest, wd2 * d, minlength=n * n_seg) / safe
     start = np.zeros(n * n_seg)
     start[dest] = b
-    safe = np.where(m0 > 0, m0, 1.0)
-    mu = m1 / safe
-    sd = np.sqrt(np.maximum(m2 / safe - mu**2, 0.0))
-    c3 = m3 / safe - 3 * mu * m2 / safe + 2 * mu**3  # third central moment
-    gamma = np.where(sd > 1e-6, c3 / np.maximum(sd, 1e-6) ** 3, 0.0)
+    gamma = np.where(sd > 1e-9, c3 / np.maximum(sd, 1e-9) ** 3, 0.0)
     root = np.sqrt(gamma**2 + 4.0)
     z1, z2 = 0.5 * (gamma - root), 0.5 * (gamma + root)  # z1 z2 = -1, z1 + z2 = gamma
     p1 = z2 / (z2 - z1)

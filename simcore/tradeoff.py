@@ -89,7 +89,7 @@ def run(repeats: int = 3, pixels: int = 256) -> dict:
     reference = None
     for att, preset in tqdm(jobs, desc="trade-off", unit="run", file=sys.stderr):
         scene = with_overrides(base, {"preset": preset, **att})
-        result, wall = _timed(pipe, scene, 1 if preset == "reference" else repeats)
+        result, wall = _timed(pipe, scene, repeats)
         if preset == "reference":
             reference, ref_time = result, wall
         row = {"preset": preset, **att, "time_s": wall, "speedup": ref_time / wall}

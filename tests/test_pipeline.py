@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+import threadpoolctl
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -144,3 +145,24 @@ def test_a_run_told_to_stop_raises_cancelled_and_keeps_what_it_finished():
         pipe.run(scene, should_stop=stop_after_hits)
     res = pipe.run(scene)
     assert res.timings_s["hits"] == 0.0 and res.timings_s["echo"] > 0.0
+
+
+def test_a_frame_runs_with_blas_single_threaded_and_restores_it(plate_scene, monkeypatch):
+    """OpenBLAS threads spin after each call and take the cores of the frame's own threads."""
+    from simcore import pipeline
+
+    def blas_threads():
+        return [
+            i["num_threads"] for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas"
+        ]
+
+    before = blas_threads()
+    assert before  # numpy's BLAS is loaded
+    seen = []
+    stage_cloud = pipeline.stage_cloud
+    monkeypatch.setattr(
+        pipeline, "stage_cloud", lambda *a: seen.append(blas_threads()) or stage_cloud(*a)
+    )
+    simcore.Pipeline().run(plate_scene())
+    assert seen and all(n == 1 for n in seen[0])
+    assert blas_threads() == before

@@ -96,17 +96,74 @@ def test_eq25_paper_form_is_c_tau_r_sqrt_1_k2_over_snr_1_k():
     assert got == pytest.approx(sc.c * 2e-9 * np.sqrt(1.25) / (10 * 0.5), rel=1e-12)
 
 
-def test_single_return_echo_timing_is_exact_whatever_the_grid_phase():
+@pytest.mark.parametrize("elements", [1, 2])
+def test_single_return_echo_timing_is_exact_whatever_the_grid_phase(elements):
     """Eq. 31: a single return at distance r gives R = r, to well below a millimetre, wherever
-    its arrival falls between the samples."""
+    its arrival falls between the samples: as one element (the pulse's own features, shifted) and
+    as two coincident halves (sampled on the pixel's grid and refined)."""
     shape = echo.pulse_shape(TAU, echo.A_FWHM, B)
     dt = echo.default_time_step_s(TAU, B)
     r = 500.0 + np.linspace(0, 0.2, 41)  # sweeps the arrival over about one sample
-    arrivals = (2 * r / sc.c)[:, None]
-    feats = echo.echo_features(shape, arrivals, np.full((41, 1), 1e-12), dt, 2.24e-9, 0.5)
+    arrivals = np.repeat((2 * r / sc.c)[:, None], elements, axis=1)
+    weights = np.full((41, elements), 1e-12 / elements)
+    feats = echo.echo_features(shape, arrivals, weights, dt, 2.24e-9, 0.5)
     ranges = timing.range_from_half_max_m(feats.t_half_s, shape.t_half_s)
     assert np.max(np.abs(ranges - r)) < 1e-5
     assert np.allclose(feats.peak_w_per_j, 1e-12 * shape.peak_w_per_j, rtol=1e-6)
+
+
+def test_a_one_element_echo_has_the_features_of_the_same_echo_sampled_and_refined():
+    shape = echo.pulse_shape(TAU, echo.A_FWHM, B)
+    dt = echo.default_time_step_s(TAU, B)
+    t = 3.3e-6 + np.linspace(0, dt, 7)[:, None]
+    one = echo.echo_features(
+        shape, np.hstack([t, t]), np.hstack([np.ones_like(t), 0 * t]), dt, 2.24e-9, 0.3
+    )
+    two = echo.echo_features(shape, np.hstack([t, t]), np.full((7, 2), 0.5), dt, 2.24e-9, 0.3)
+    assert np.allclose(one.t_half_s, two.t_half_s, rtol=0, atol=1e-14)  # 1.5 um of range
+    assert np.allclose(one.peak_w_per_j, two.peak_w_per_j, rtol=1e-9)
+    assert np.allclose(one.cfd_slope_per_s, two.cfd_slope_per_s, rtol=1e-6)
+
+
+def test_merged_elements_keep_each_pixels_energy_mean_delay_spread_and_skew():
+    rng = np.random.default_rng(7)
+    n, k = 200, 64
+    arrivals = 3.3e-6 + rng.uniform(0, 4e-9, (n, k)) * (rng.random((n, 1)) < 0.5)
+    arrivals += rng.choice([0.0, 2e-8], (n, k))  # two surfaces 3 m apart in some pixels
+    weights = rng.uniform(0, 1e-12, (n, k)) * (rng.random((n, k)) < 0.8)
+    window = 0.7e-9
+    t, w = echo.merge_elements(arrivals, weights, window)
+    assert t.shape[1] < k and np.all(w >= 0)
+    t0 = arrivals.min(axis=1, keepdims=True)
+    for p in range(4):
+        before = (weights * ((arrivals - t0) / window) ** p).sum(axis=1)
+        after = (w * ((t - t0) / window) ** p).sum(axis=1)
+        assert np.allclose(after, before, rtol=1e-9, atol=1e-24), p
+    has = weights > 0
+    lo = np.where(has, arrivals, np.inf).min(axis=1)
+    hi = np.where(has, arrivals, -np.inf).max(axis=1)
+    used = w > 0
+    assert np.all((t >= lo[:, None] - 1e-18) | ~used) and np.all((t <= hi[:, None] + 1e-18) | ~used)
+
+
+def test_merging_within_a_quarter_rise_time_moves_the_range_by_far_less_than_a_millimetre():
+    shape = echo.pulse_shape(TAU, echo.A_FWHM, B)
+    dt = echo.default_time_step_s(TAU, B)
+    rng = np.random.default_rng(3)
+    n, k = 300, 64
+    # tilted planes (up to 30 cm of relief in a pixel) and steps of 0-2 m
+    relief = rng.uniform(0, 0.3, (n, 1)) * rng.uniform(0, 1, (n, k))
+    step = rng.uniform(0, 2.0, (n, 1)) * (rng.random((n, k)) < rng.uniform(0, 1, (n, 1)))
+    arrivals = 2 * (500.0 + relief + step) / sc.c
+    weights = rng.uniform(0.5, 1.0, (n, k)) * 1e-12
+    window = 0.25 * timing.rise_time_10_90_s(shape)
+    full = echo.echo_features(shape, arrivals, weights, dt, 2.24e-9, 0.5)
+    merged = echo.echo_features(
+        shape, *echo.merge_elements(arrivals, weights, window), dt, 2.24e-9, 0.5
+    )
+    range_err = np.abs(merged.t_half_s - full.t_half_s) * sc.c / 2
+    assert np.max(range_err) < 5e-4 and np.median(range_err) < 1e-5  # 0.5 mm, 10 um
+    assert np.allclose(merged.peak_w_per_j, full.peak_w_per_j, rtol=1e-3)
 
 
 def test_cfd_slope_of_a_single_pulse_is_the_half_max_slope():

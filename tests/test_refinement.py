@@ -64,7 +64,10 @@ def test_a_depth_step_inside_a_pixel_is_refined_even_when_aligned_with_the_sub_g
 
 def test_refined_pixels_reproduce_the_reference_exactly(tmp_path):
     pipe = simcore.Pipeline()
-    fast = pipe.run(step_scene(tmp_path, 65, preset="interactive"))
+    # (with the interactive preset's corner probes, without its merging of sub-ray echoes)
+    fast = pipe.run(
+        step_scene(tmp_path, 65, preset="interactive", **{"fidelity.merge_window": 0.0})
+    )
     ref = pipe.run(step_scene(tmp_path, 65, preset="reference", **{"fidelity.time_step_s": 0.0}))
     refined = fast.hits.refined_pixels
     assert len(refined) > 0
@@ -83,3 +86,55 @@ def test_presets_set_their_knobs_and_explicit_keys_win():
     assert s.preset == "interactive" and s.fidelity.subrays == 4
     assert s.fidelity.refine_subrays == 64
     assert simcore.with_overrides(simcore.Scene(), preset="reference").fidelity.subrays == 64
+
+
+def bar_scene(tmp_path, **overrides):
+    """A 4 m plate at 200 m and, 1 m in front of it, a 4 cm bar along the image's middle: between
+    the two middle rows (or columns) of pixel centres of a 64 x 64 array (9.4 cm apart there)."""
+    plate = trimesh.creation.box(extents=(4.0, 4.0, 1e-3))
+    bar = trimesh.creation.box(extents=(3.0, 0.04, 0.01))
+    bar.apply_translation((0.0, 0.0, -1.0))
+    path = tmp_path / "bar.obj"
+    trimesh.util.concatenate([plate, bar]).export(path)
+    base = {
+        "target.mesh": str(path),
+        "target.scale_m_per_unit": 1.0,
+        "pixels": 64,
+        "distance_m": 200.0,
+        "target.materials": {"*": "lambertian"},
+        "preset": "interactive",
+    }
+    return simcore.with_overrides(simcore.Scene(), {**base, **overrides})
+
+
+def test_corner_probes_find_a_thin_part_that_every_pixel_centre_misses(tmp_path):
+    pipe = simcore.Pipeline()
+    centres = pipe.run(bar_scene(tmp_path, **{"fidelity.probe_corners": False}))
+    plate_range = np.median(centres.hits.range_m[np.isfinite(centres.hits.range_m)])
+    in_front = lambda block: block.range_m < plate_range - 0.5  # noqa: E731
+    assert not in_front(centres.hits.base).any()  # no pixel centre sees the bar...
+    refined = centres.hits.refined
+    assert refined is None or not in_front(refined).any()  # ...so nothing finds it
+
+    probed = pipe.run(bar_scene(tmp_path))
+    hits = probed.hits
+    rows_or_cols = np.unique(np.divmod(hits.refined_pixels[in_front(hits.refined).any(axis=1)], 64))
+    seen = in_front(hits.refined).any(axis=1).sum()
+    assert seen >= 2 * 30  # two lines of pixels along the bar (3 m of the 6 m field: 32 a line)
+    assert {31, 32} <= set(rows_or_cols.tolist())
+    # those pixels are sampled as the reference samples them
+    ref = pipe.run(bar_scene(tmp_path, preset="reference"))
+    assert abs(probed.detection.p_detect.sum() / ref.detection.p_detect.sum() - 1) < 0.005
+
+
+def test_corner_probes_refine_one_ring_of_silhouette_pixels_not_two(plate_scene):
+    """A straight edge crosses a square pixel if and only if it separates two of its corners:
+    with corners, the pixels just outside the silhouette need no refinement."""
+    knobs = {"fidelity.subrays": 1, "fidelity.refine_subrays": 64, "fidelity.refine_step_m": 0.05}
+    pipe = simcore.Pipeline()
+    scene = plate_scene(size_m=4.1, distance_m=300.0, pixels=64, **knobs)
+    two = pipe.run(scene).hits.refined_pixels
+    one = pipe.run(simcore.with_overrides(scene, {"fidelity.probe_corners": True})).hits
+    assert 0 < len(one.refined_pixels) < 0.6 * len(two)
+    covered = (one.refined.face >= 0).mean(axis=1)
+    assert np.all((covered > 0) & (covered < 1))  # each refined pixel straddles the edge

@@ -37,9 +37,12 @@ def preset_text(name: str) -> str:
     refine = knobs.get("fidelity.refine_subrays", 0)
     if refine:
         step_cm = knobs.get("fidelity.refine_step_m", 0.0) * 100
-        text += f", {refine} on mixed pixels (edges, depth steps > {step_cm:g} cm)"
+        text += f", {refine} on mixed pixels (edges, depth steps > {step_cm:g} cm"
+        text += ", found with pixel-corner rays)" if knobs.get("fidelity.probe_corners") else ")"
     else:
         text += ", no refinement"
+    if knobs.get("fidelity.merge_window"):
+        text += ", close sub-ray echoes merged"
     step_s = knobs.get("fidelity.time_step_s", 0.0)
     text += f", time step {step_s * 1e12:g} ps" if step_s else ", time step auto"
     return text

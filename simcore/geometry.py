@@ -321,13 +321,20 @@ def cast_ranges(caster: RayCaster, directions_s, pose: PoseInSensor):
     return range_m, face, dirs_t
 
 
+def incidence_cos(caster: RayCaster, face, directions_t) -> np.ndarray:
+    """(n,) abs(cos) of the incidence angle of rays on the faces they hit, 0 for a miss."""
+    hit = face >= 0
+    cos_t = np.zeros(len(face))
+    cos_t[hit] = np.abs(np.einsum("ij,ij->i", caster.facet_normals(face[hit]), directions_t[hit]))
+    return cos_t
+
+
 def cast_block(caster: RayCaster, pixel, directions, pose: PoseInSensor) -> HitBlock:
     """First hits of the sub-rays ``directions`` (n, K, 3, sensor frame) of pixels ``pixel``."""
     dirs_s = directions.reshape(-1, 3)
     range_m, face, dirs_t = cast_ranges(caster, dirs_s, pose)
     hit = face >= 0
-    cos_t = np.zeros_like(range_m)
-    cos_t[hit] = np.abs(np.einsum("ij,ij->i", caster.facet_normals(face[hit]), dirs_t[hit]))
+    cos_t = incidence_cos(caster, face, dirs_t)
     depth = np.where(hit, range_m * dirs_s[:, 2], np.inf)
     shape = directions.shape[:2]
     return HitBlock(
@@ -457,8 +464,7 @@ def probe(caster: RayCaster, rays: RayGrid, pose: PoseInSensor) -> CornerSamples
     """Cast the rays through the pixel corners."""
     range_m, face, dirs_t = cast_ranges(caster, rays.corner_directions, pose)
     hit = face >= 0
-    cos_t = np.zeros_like(range_m)
-    cos_t[hit] = np.abs(np.einsum("ij,ij->i", caster.facet_normals(face[hit]), dirs_t[hit]))
+    cos_t = incidence_cos(caster, face, dirs_t)
     part = np.where(hit, caster.model.face_part[np.maximum(face, 0)], -1)
     n1 = rays.pixels + 1
     return CornerSamples(range_m.reshape(n1, n1), part.reshape(n1, n1), cos_t.reshape(n1, n1))

@@ -254,7 +254,7 @@ def _refined_peak(shape, table, arrivals, weights, grid, y, dt):
     return np.maximum(_eval_exact(shape, table, arrivals, weights, t_v), np.maximum(e1, y1))
 
 
-def _features_chunk(shape, arrivals, weights, t_first, n_samples, dt, t_d, k_att, raw, t_begin):
+def _features_chunk(shape, arrivals, weights, t_first, n_samples, dt, t_d, t_begin, k_att, raw):
     n = len(arrivals)
     grid = t_first[:, None] + t_begin + dt * np.arange(n_samples)[None, :]  # (n, L)
     y = np.einsum("nlk,nk->nl", shape.filtered_at(grid[:, :, None] - arrivals[:, None, :]), weights)
@@ -381,7 +381,8 @@ def echo_features(
                 pending = pending[:0]
 
         def work(job):
-            return job[0], _features_chunk(shape, *job[1:7], k_att, raw_peak, job[7])
+            pixels, args = job
+            return pixels, _features_chunk(shape, *args, k_att, raw_peak)
 
         # numpy releases the GIL in these array passes: two threads use both cores, when the work
         # is large enough to repay starting them
@@ -397,9 +398,9 @@ def echo_features(
 
 
 def _jobs(shape, arrivals, weights, pixel, dt, t_d, max_elements, threaded=False) -> list[tuple]:
-    """Chunks (pixel, arrivals, weights, t_first, length, dt, t_d, t_begin) of pixels with k
-    elements each (contributing or of weight 0), grouped by window length (at least one chunk
-    per thread if ``threaded``)."""
+    """Chunks (pixel, the arguments of _features_chunk up to t_begin) of pixels with k elements
+    each (contributing or of weight 0), grouped by window length (at least one chunk per thread
+    if ``threaded``)."""
     k = arrivals.shape[1]
     has = weights > 0
     t_first = np.where(has, arrivals, np.inf).min(axis=1)
@@ -425,8 +426,10 @@ def _jobs(shape, arrivals, weights, pixel, dt, t_d, max_elements, threaded=False
         while j > i + 1 and (j - i) * int(n_samples[j - 1]) * k > max_elements:
             j = i + max(1, min(j - i - 1, max_elements // (int(n_samples[j - 1]) * k)))
         sel = order[i:j]
-        chunk = (arrivals[sel], weights[sel], t_first[sel], int(n_samples[j - 1]), dt, t_d)
-        jobs.append((pixel[sel], *chunk, t_begin))
+        length = int(n_samples[j - 1])
+        jobs.append(
+            (pixel[sel], (arrivals[sel], weights[sel], t_first[sel], length, dt, t_d, t_begin))
+        )
         i = j
     return jobs
 
@@ -443,8 +446,10 @@ def _single_element(shape: PulseShape, dt: float, t_d: float, k_att: float, raw:
     if key not in _SINGLE:
         if len(_SINGLE) > 64:
             _SINGLE.clear()
-        (job,) = _jobs(shape, np.zeros((1, 1)), np.ones((1, 1)), np.zeros(1), dt, t_d, 1 << 20)
-        out = _features_chunk(shape, *job[1:7], k_att, raw, job[7])
+        ((_, args),) = _jobs(
+            shape, np.zeros((1, 1)), np.ones((1, 1)), np.zeros(1), dt, t_d, 1 << 20
+        )
+        out = _features_chunk(shape, *args, k_att, raw)
         _SINGLE[key] = tuple(float(v[0]) if v is not None else None for v in out)
     return _SINGLE[key]
 

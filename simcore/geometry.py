@@ -8,6 +8,7 @@ right-handed. Pixel (row i, col j) of an n x n array looks along the pinhole dir
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -146,8 +147,6 @@ class RayGrid:
         Unit direction of each sub-ray, pixel-major (flat pixel index = row * pixels + col).
     pixel_directions : (pixels**2, 3) float64
         Unit direction u_pix of each pixel centre (points are placed along it).
-    corner_directions : ((pixels + 1)**2, 3) float64
-        Unit directions through the pixel corners, row-major (for ``Fidelity.probe_corners``).
     """
 
     pixels: int
@@ -155,17 +154,23 @@ class RayGrid:
     ifov_rad: float
     directions: np.ndarray
     pixel_directions: np.ndarray
-    corner_directions: np.ndarray
     fov_rad: float
+
+    @cached_property
+    def corner_directions(self) -> np.ndarray:
+        """((pixels + 1)**2, 3) unit directions through the pixel corners, row-major (made on
+        first use, by ``Fidelity.probe_corners``)."""
+        corners = corner_directions(self.pixels, self.fov_rad)
+        corners.setflags(write=False)
+        return corners
 
 
 def ray_grid(pixels: int, fov_rad: float, subrays: int) -> RayGrid:
     dirs = subray_directions(pixels, fov_rad, subrays)
     centre = subray_directions(pixels, fov_rad, 1)[:, 0]
-    corners = corner_directions(pixels, fov_rad)
-    for a in (dirs, centre, corners):
+    for a in (dirs, centre):
         a.setflags(write=False)
-    return RayGrid(pixels, dirs.shape[1], fov_rad / pixels, dirs, centre, corners, fov_rad)
+    return RayGrid(pixels, dirs.shape[1], fov_rad / pixels, dirs, centre, fov_rad)
 
 
 # ----------------------------------------------------------------------------------------------

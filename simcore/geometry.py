@@ -7,6 +7,7 @@ right-handed. Pixel (row i, col j) of an n x n array looks along the pinhole dir
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -241,6 +242,8 @@ class HitBlock:
     face : (n, K) int32 -- facet id, -1 on a miss
     depth_m : (n, K) float64 -- boresight depth z of the hit, sensor frame (for the paper's
         one-way-delay form of Eq. 29)
+    spread_m : (n,) float64 or None -- standard deviation of the range over each sub-ray's cell
+        of the pixel (``cell_spread``), None: each sub-ray a point sample
     """
 
     pixel: np.ndarray
@@ -249,10 +252,17 @@ class HitBlock:
     cos_theta: np.ndarray
     face: np.ndarray
     depth_m: np.ndarray
+    spread_m: np.ndarray | None = None
 
     @property
     def subrays(self) -> int:
         return self.directions.shape[1]
+
+    def take(self, rows) -> HitBlock:
+        """The block of some of its pixels (an index or a boolean mask)."""
+        fields = (self.pixel, self.directions, self.range_m, self.cos_theta, self.face)
+        spread = self.spread_m[rows] if self.spread_m is not None else None
+        return HitBlock(*(x[rows] for x in fields), self.depth_m[rows], spread)
 
 
 @dataclass(frozen=True)
@@ -293,11 +303,7 @@ class Hits:
             return [self.base]
         keep = np.ones(len(self.base.pixel), bool)
         keep[self.refined.pixel] = False
-        b = self.base
-        base = HitBlock(
-            *(x[keep] for x in (b.pixel, b.directions, b.range_m, b.cos_theta, b.face, b.depth_m))
-        )
-        return [base, self.refined]
+        return [self.base.take(keep), self.refined]
 
     @property
     def hit_pixel_mask(self) -> np.ndarray:
@@ -465,6 +471,44 @@ def _corner_flags(block, pixels, step_m, corners, face_part, r_mean, full) -> np
     return flag
 
 
+def cell_spread_m(block: HitBlock, pixels: int, corners: CornerSamples | None) -> np.ndarray:
+    """(n_pix,) standard deviation of the range over each sub-ray's cell of the pixel [m].
+
+    A k x k grid of sub-rays samples a tilted surface at points; each stands for a cell 1/k of
+    the pixel on a side over which the range changes by g/k (g, the range change across the
+    pixel, along x and y): a uniform spread of variance (g_x^2 + g_y^2) / (12 k^2) that the point
+    samples leave out (for one ray per pixel, all of the pixel's pulse broadening). The slope
+    comes from the pixel's four corners where they all hit, else from the plane fitted to the
+    sub-rays where they all hit (k > 1), else it is taken as 0.
+    """
+    k = int(round(np.sqrt(block.subrays)))
+    hit = block.face >= 0
+    full = hit.all(axis=1)
+    gx = np.zeros(pixels * pixels)
+    gy = np.zeros(pixels * pixels)
+    if k > 1:  # the least-squares plane over the sub-pixel grid, slopes per pixel
+        g = (np.arange(k) - (k - 1) / 2.0) / k
+        x, y = np.tile(g, k), np.repeat(g, k)
+        r = np.where(hit, block.range_m, 0.0)
+        gx = np.where(full, r @ x / (x @ x), 0.0)
+        gy = np.where(full, r @ y / (y @ y), 0.0)
+    if corners is not None:
+        c = _quad(corners.range_m).reshape(
+            4, -1
+        )  # (top-left, top-right, bottom-left, bottom-right)
+        ok = np.isfinite(c).all(axis=0)
+        c = np.where(ok, c, 0.0)
+        gx = np.where(ok, 0.5 * (c[1] - c[0] + c[3] - c[2]), gx)
+        gy = np.where(ok, 0.5 * (c[2] - c[0] + c[3] - c[1]), gy)
+    return np.sqrt((gx**2 + gy**2) / 12.0) / k
+
+
+def straddles(corner_values: np.ndarray) -> np.ndarray:
+    """(n, n) bool: the pixel's four corners disagree, from an (n + 1, n + 1) bool corner image."""
+    q = _quad(corner_values)
+    return q.any(axis=0) & ~q.all(axis=0)
+
+
 def probe(caster: RayCaster, rays: RayGrid, pose: PoseInSensor) -> CornerSamples:
     """Cast the rays through the pixel corners."""
     range_m, face, dirs_t = cast_ranges(caster, rays.corner_directions, pose)
@@ -482,15 +526,27 @@ def cast(
     refine_subrays: int = 0,
     refine_step_m: float = 0.02,
     probe_corners: bool = False,
+    cell_spread: bool = False,
+    lit_edge: np.ndarray | None = None,
 ) -> Hits:
     """First hit of every sub-ray of the array for the target in ``pose``; with
     ``refine_subrays`` > the base count, the mixed pixels are cast again that densely (found with
-    rays through the pixel corners too if ``probe_corners``)."""
+    rays through the pixel corners too if ``probe_corners``), and so are the pixels of
+    ``lit_edge`` ((pixels, pixels) bool: the edge of the illuminated field crosses them) that see
+    the target. With ``cell_spread`` the base block carries each sub-ray cell's range spread
+    (``cell_spread_m``)."""
     base = cast_block(caster, np.arange(rays.pixels**2), rays.directions, pose)
-    refined = None
+    refined = corners = None
     if refine_subrays > rays.subrays:
         corners = probe(caster, rays, pose) if probe_corners else None
         which = mixed_pixels(base, rays.pixels, refine_step_m, corners, caster.model.face_part)
+        if lit_edge is not None:
+            seen = (base.face >= 0).any(axis=1)
+            if corners is not None:
+                seen |= np.isfinite(_quad(corners.range_m)).any(axis=0).ravel()
+            which = np.union1d(which, np.flatnonzero(lit_edge.ravel() & seen))
         dirs = subray_directions(rays.pixels, rays.fov_rad, refine_subrays, which)
         refined = cast_block(caster, which, dirs, pose)
+    if cell_spread:
+        base = dataclasses.replace(base, spread_m=cell_spread_m(base, rays.pixels, corners))
     return Hits(base, refined, pose)

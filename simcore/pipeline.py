@@ -244,8 +244,21 @@ def stage_rays(scene: Scene) -> geometry.RayGrid:
 def stage_hits(scene: Scene, tgt: TargetStage, rays: geometry.RayGrid) -> geometry.Hits:
     pose = geometry.target_pose(scene.pose, tgt.model.mesh.extents, tgt.model.body_from_mesh)
     fid = scene.fidelity
+    lit_edge = None
+    if fid.refine_subrays > rays.subrays:  # pixels the edge of a flat-top or square beam crosses
+        gain = echo.illumination_gain(
+            rays.corner_directions, scene.illumination_angle_rad, scene.transmit.illumination
+        )
+        lit_edge = geometry.straddles((gain > 0).reshape(rays.pixels + 1, -1))
     hits = geometry.cast(
-        tgt.caster, rays, pose, fid.refine_subrays, fid.refine_step_m, fid.probe_corners
+        tgt.caster,
+        rays,
+        pose,
+        fid.refine_subrays,
+        fid.refine_step_m,
+        fid.probe_corners,
+        fid.cell_spread,
+        lit_edge,
     )
     for block in (hits.base, hits.refined):
         if block is not None:
@@ -331,8 +344,10 @@ def _echo_block(scene, model, block: geometry.HitBlock, shape, dt, t_d) -> dict[
     strongest = np.argmax(weights, axis=1)[:, None]
     material_id = np.take_along_axis(mat, strongest, axis=1)[:, 0]
     facet_id = np.take_along_axis(face, strongest, axis=1)[:, 0]
+    if block.spread_m is not None:  # each sub-ray's cell: a pair of half echoes +- its spread
+        arrivals, weights = echo.split_elements(arrivals, weights, 2.0 * block.spread_m[rows] / C)
     window = scene.fidelity.merge_window * timing.rise_time_10_90_s(shape)
-    if window > 0 and block.subrays > 2:
+    if window > 0 and arrivals.shape[1] > 2:
         arrivals, weights = echo.merge_elements(arrivals, weights, window)
     feats = echo.echo_features(
         shape,
@@ -467,6 +482,9 @@ def _deps(scene: Scene) -> dict[str, tuple]:
             scene.fidelity.refine_subrays,
             scene.fidelity.refine_step_m,
             scene.fidelity.probe_corners,
+            scene.fidelity.cell_spread,
+            scene.illumination_angle_rad,
+            scene.transmit.illumination,
         ),
         "echo": (
             lz.pulse_width_s,

@@ -193,6 +193,13 @@ class Fidelity:
         doc="with refinement: also cast a ray through every pixel corner to find mixed pixels "
         "(thin parts between pixel centres; the silhouette without its outer ring)",
     )
+    cell_spread: bool = _f(
+        False,
+        "-",
+        doc="each base sub-ray stands for its cell of the pixel: its echo is spread by the range "
+        "change across the cell (slope from the pixel corners or the sub-ray plane), so one ray "
+        "per pixel still sees a tilted surface broaden the pulse",
+    )
     noise_model: str = _f(
         "statistical",
         "-",
@@ -223,8 +230,9 @@ PRESETS: dict[str, dict[str, Any]] = {
     "interactive": {
         "fidelity.subrays": 1,
         "fidelity.refine_subrays": 64,
-        "fidelity.refine_step_m": 0.05,
+        "fidelity.refine_step_m": 0.02,
         "fidelity.probe_corners": True,
+        "fidelity.cell_spread": True,
         "fidelity.merge_window": 0.25,
         "fidelity.time_step_s": 0.0,
     },
@@ -232,7 +240,8 @@ PRESETS: dict[str, dict[str, Any]] = {
         "fidelity.subrays": 4,
         "fidelity.refine_subrays": 64,
         "fidelity.refine_step_m": 0.02,
-        "fidelity.probe_corners": False,
+        "fidelity.probe_corners": True,
+        "fidelity.cell_spread": True,
         "fidelity.merge_window": 0.25,
         "fidelity.time_step_s": 0.0,
     },
@@ -242,6 +251,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "fidelity.refine_subrays": 0,
         "fidelity.refine_step_m": 0.02,
         "fidelity.probe_corners": False,
+        "fidelity.cell_spread": False,
         "fidelity.merge_window": 0.0,
         "fidelity.time_step_s": 1e-10,
     },

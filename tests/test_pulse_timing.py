@@ -96,11 +96,12 @@ def test_eq25_paper_form_is_c_tau_r_sqrt_1_k2_over_snr_1_k():
     assert got == pytest.approx(sc.c * 2e-9 * np.sqrt(1.25) / (10 * 0.5), rel=1e-12)
 
 
-@pytest.mark.parametrize("elements", [1, 2])
+@pytest.mark.parametrize("elements", [1, 2, 3])
 def test_single_return_echo_timing_is_exact_whatever_the_grid_phase(elements):
     """Eq. 31: a single return at distance r gives R = r, to well below a millimetre, wherever
-    its arrival falls between the samples: as one element (the pulse's own features, shifted) and
-    as two coincident halves (sampled on the pixel's grid and refined)."""
+    its arrival falls between the samples: as one element (the pulse's own features, shifted), as
+    two coincident halves (the two-element table) and as three thirds (sampled on the pixel's
+    grid and refined)."""
     shape = echo.pulse_shape(TAU, echo.A_FWHM, B)
     dt = echo.default_time_step_s(TAU, B)
     r = 500.0 + np.linspace(0, 0.2, 41)  # sweeps the arrival over about one sample
@@ -117,12 +118,62 @@ def test_a_one_element_echo_has_the_features_of_the_same_echo_sampled_and_refine
     dt = echo.default_time_step_s(TAU, B)
     t = 3.3e-6 + np.linspace(0, dt, 7)[:, None]
     one = echo.echo_features(
-        shape, np.hstack([t, t]), np.hstack([np.ones_like(t), 0 * t]), dt, 2.24e-9, 0.3
+        shape, np.hstack([t, t, t]), np.hstack([np.ones_like(t), 0 * t, 0 * t]), dt, 2.24e-9, 0.3
     )
-    two = echo.echo_features(shape, np.hstack([t, t]), np.full((7, 2), 0.5), dt, 2.24e-9, 0.3)
-    assert np.allclose(one.t_half_s, two.t_half_s, rtol=0, atol=1e-14)  # 1.5 um of range
-    assert np.allclose(one.peak_w_per_j, two.peak_w_per_j, rtol=1e-9)
-    assert np.allclose(one.cfd_slope_per_s, two.cfd_slope_per_s, rtol=1e-6)
+    three = echo.echo_features(
+        shape, np.hstack([t, t, t]), np.full((7, 3), 1 / 3), dt, 2.24e-9, 0.3
+    )
+    assert np.allclose(one.t_half_s, three.t_half_s, rtol=0, atol=1e-14)  # 1.5 um of range
+    assert np.allclose(one.peak_w_per_j, three.peak_w_per_j, rtol=1e-9)
+    assert np.allclose(one.cfd_slope_per_s, three.cfd_slope_per_s, rtol=1e-6)
+
+
+def test_a_two_element_echo_from_the_table_has_the_features_of_the_same_echo_sampled():
+    """Two elements up to half a rise time apart, any share of the weight: the table's features
+    against the same echo with its first element cut in two halves (sampled and refined)."""
+    shape = echo.pulse_shape(TAU, echo.A_FWHM, B)
+    dt = echo.default_time_step_s(TAU, B)
+    reach = echo.PAIR_REACH * timing.rise_time_10_90_s(shape)
+    rng = np.random.default_rng(11)
+    n = 400
+    t1 = 3.3e-6 + rng.uniform(0, 1e-7, n)
+    d = rng.uniform(0, reach, n)
+    q = rng.uniform(0.01, 0.99, n)
+    w = rng.uniform(0.5, 2.0, n) * 1e-12
+    pair = echo.echo_features(
+        shape, np.stack([t1 + d, t1], 1), np.stack([w * (1 - q), w * q], 1), dt, 2.24e-9, 0.5
+    )
+    sampled = echo.echo_features(
+        shape,
+        np.stack([t1, t1, t1 + d], 1),
+        np.stack([w * q / 2, w * q / 2, w * (1 - q)], 1),
+        dt,
+        2.24e-9,
+        0.5,
+    )
+    assert np.max(np.abs(pair.t_half_s - sampled.t_half_s)) * sc.c / 2 < 2e-5  # 20 um
+    assert np.allclose(pair.peak_w_per_j, sampled.peak_w_per_j, rtol=1e-4)
+    # the sampled slope takes differences of the tabulated pulse: ~1e-3 of noise
+    assert np.allclose(pair.cfd_slope_per_s, sampled.cfd_slope_per_s, rtol=5e-3)
+
+
+def test_split_elements_adds_each_cells_spread_and_keeps_energy_and_mean():
+    rng = np.random.default_rng(5)
+    n, k = 50, 4
+    arrivals = 3.3e-6 + rng.uniform(0, 1e-9, (n, k))
+    weights = rng.uniform(0, 1e-12, (n, k)) * (rng.random((n, k)) < 0.8)
+    spread = rng.uniform(0, 3e-10, n) * (rng.random(n) < 0.7)
+    t, w = echo.split_elements(arrivals, weights, spread)
+    assert t.shape == (n, 2 * k)
+    total = weights.sum(axis=1)
+    mean = (weights * arrivals).sum(axis=1) / np.where(total > 0, total, 1)
+    var = (weights * (arrivals - mean[:, None]) ** 2).sum(axis=1)
+    assert np.allclose(w.sum(axis=1), total, rtol=1e-12)
+    assert np.allclose((w * t).sum(axis=1), (weights * arrivals).sum(axis=1), rtol=1e-12)
+    added = (w * (t - mean[:, None]) ** 2).sum(axis=1) - var
+    assert np.allclose(added, total * spread**2, rtol=1e-6, atol=1e-40)
+    none = spread == 0  # no spread: each element stays whole, its twin has no weight
+    assert np.array_equal((w[none] > 0).sum(axis=1), (weights[none] > 0).sum(axis=1))
 
 
 def test_merged_elements_keep_each_pixels_energy_mean_delay_spread_and_skew():

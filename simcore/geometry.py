@@ -207,7 +207,9 @@ class RayCaster:
         n = len(directions_t)
         starts = (origins_t[None, :] + start_m * directions_t).astype(np.float32)
         dirs32 = directions_t.astype(np.float32)
-        parts = parallel.threads() if n > 4096 else 1
+        # a few chunks per thread: rays near fine detail cost several times more than others,
+        # and equal halves of an image are rarely equal work
+        parts = parallel.threads() * (4 if n > 16384 else 1) if n > 4096 else 1
         bounds = np.linspace(0, n, parts + 1).astype(int)
         chunks = [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
 

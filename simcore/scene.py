@@ -237,9 +237,9 @@ PRESETS: dict[str, dict[str, Any]] = {
         "fidelity.time_step_s": 0.0,
     },
     "balanced": {
-        "fidelity.subrays": 4,
+        "fidelity.subrays": 1,
         "fidelity.refine_subrays": 64,
-        "fidelity.refine_step_m": 0.02,
+        "fidelity.refine_step_m": 0.01,
         "fidelity.probe_corners": True,
         "fidelity.cell_spread": True,
         "fidelity.merge_window": 0.25,

@@ -24,20 +24,11 @@ def step_scene(tmp_path, pixels, step_m=1.5, **overrides):
     return simcore.with_overrides(simcore.Scene(), {**base, **overrides})
 
 
-def test_a_tilted_plane_needs_no_refinement_inside_its_silhouette(plate_scene):
-    res = simcore.Pipeline().run(
-        plate_scene(
-            size_m=4.0,
-            distance_m=300.0,
-            azimuth_deg=60.0,
-            pixels=64,
-            **{"fidelity.subrays": 4, "fidelity.refine_subrays": 64},
-        )
-    )
-    refined = np.zeros(64 * 64, bool)
-    refined[res.hits.refined_pixels] = True
-    interior = res.hits.base.face.reshape(64, 64, -1).min(axis=2) >= 0  # fully covered pixels
-    for _ in range(2):  # two rings in: next to a partly covered pixel the mean range is biased
+def _interior(res, pixels):
+    """(pixels, pixels) bool: fully covered pixels two rings in from any partly covered one
+    (next to a partly covered pixel the mean range is biased)."""
+    interior = res.hits.base.face.reshape(pixels, pixels, -1).min(axis=2) >= 0
+    for _ in range(2):
         inner = np.zeros_like(interior)
         inner[1:-1, 1:-1] = (
             interior[1:-1, 1:-1]
@@ -47,9 +38,28 @@ def test_a_tilted_plane_needs_no_refinement_inside_its_silhouette(plate_scene):
             & interior[1:-1, 2:]
         )
         interior = inner
-    assert interior.sum() > 200
-    assert not refined.reshape(64, 64)[interior].any()  # a plane at 60 deg: nothing inside
-    assert refined.sum() > 0  # but its silhouette is
+    return interior
+
+
+def test_a_tilted_plane_needs_no_refinement_inside_its_silhouette_unless_steep(plate_scene):
+    """At 300 m a pixel spans 14 cm: a plane at 45 deg changes range by 14 cm across each pixel,
+    one at 70 deg by 39 cm, more than half the pulse's rise time (21 cm): its echo is a plateau
+    and its pixels are refined."""
+    pipe = simcore.Pipeline()
+    knobs = {"fidelity.subrays": 4, "fidelity.refine_subrays": 64}
+    for azimuth, steep in ((45.0, False), (70.0, True)):
+        scene = plate_scene(size_m=4.0, distance_m=300.0, azimuth_deg=azimuth, pixels=64, **knobs)
+        res = pipe.run(scene)
+        refined = np.zeros(64 * 64, bool)
+        refined[res.hits.refined_pixels] = True
+        interior = _interior(res, 64)
+        assert interior.sum() > 100
+        assert (
+            refined.reshape(64, 64)[interior].all()
+            if steep
+            else not refined[interior.ravel()].any()
+        )
+        assert refined.sum() > 0  # its silhouette is refined either way
 
 
 def test_a_depth_step_inside_a_pixel_is_refined_even_when_aligned_with_the_sub_grid(tmp_path):

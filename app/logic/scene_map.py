@@ -41,6 +41,8 @@ def preset_text(name: str) -> str:
         text += ", found with pixel-corner rays)" if knobs.get("fidelity.probe_corners") else ")"
     else:
         text += ", no refinement"
+    if knobs.get("fidelity.cell_spread"):
+        text += ", each ray spread over its cell's depth"
     if knobs.get("fidelity.merge_window"):
         text += ", close sub-ray echoes merged"
     step_s = knobs.get("fidelity.time_step_s", 0.0)

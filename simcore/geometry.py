@@ -134,8 +134,13 @@ def subray_directions(pixels: int, fov_rad: float, subrays: int, pixel_index=Non
 
 def unit_directions(tx, ty) -> np.ndarray:
     """(..., 3) unit vectors normalize((tx, ty, 1))."""
-    d = np.stack(np.broadcast_arrays(tx, ty, np.ones_like(tx)), axis=-1)
-    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+    tx, ty = np.broadcast_arrays(np.asarray(tx, dtype=np.float64), ty)
+    d = np.empty((*tx.shape, 3))
+    inv = 1.0 / np.sqrt(1.0 + tx * tx + ty * ty)
+    np.multiply(tx, inv, out=d[..., 0])
+    np.multiply(ty, inv, out=d[..., 1])
+    d[..., 2] = inv
+    return d
 
 
 @dataclass(frozen=True)
@@ -228,7 +233,7 @@ class RayCaster:
 
     def facet_normals(self, face):
         """(n, 3) unit normals (target frame) of the given faces."""
-        return self._normals[face]
+        return np.take(self._normals, face, axis=0)  # (faster than fancy indexing rows)
 
 
 @dataclass(frozen=True)
@@ -336,10 +341,8 @@ def cast_ranges(caster: RayCaster, directions_s, pose: PoseInSensor):
 
 def incidence_cos(caster: RayCaster, face, directions_t) -> np.ndarray:
     """(n,) abs(cos) of the incidence angle of rays on the faces they hit, 0 for a miss."""
-    hit = face >= 0
-    cos_t = np.zeros(len(face))
-    cos_t[hit] = np.abs(np.einsum("ij,ij->i", caster.facet_normals(face[hit]), directions_t[hit]))
-    return cos_t
+    normals = caster.facet_normals(np.maximum(face, 0))
+    return np.where(face >= 0, np.abs(np.einsum("ij,ij->i", normals, directions_t)), 0.0)
 
 
 def cast_block(caster: RayCaster, pixel, directions, pose: PoseInSensor) -> HitBlock:

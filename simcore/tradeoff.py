@@ -170,6 +170,15 @@ def plot(fig: dict, path: Path) -> None:
             marker=markers[k],
             label=f"pitch {att['pitch_deg']:.0f}, azimuth {att['azimuth_deg']:.0f} deg",
         )
+    ref_time = statistics.median(r["time_s"] for r in fig["rows"] if r["preset"] == "reference")
+    goals = (("interactive", 20.0, 5.0), ("balanced", 5.0, 2.0))  # the targets
+    for preset, speedup, rmse_mm in goals:
+        c = colours[preset]
+        ax.axvline(ref_time / speedup * 1e3, color=c, ls=":", lw=1)
+        ax.axhline(rmse_mm, color=c, ls=":", lw=1)
+        ax.plot(
+            [], [], color=c, ls=":", label=f"{preset} goal: {speedup:g}x faster, {rmse_mm:g} mm"
+        )
     ax.set_xscale("log")
     ax.set_yscale("log")
     n = fig["pixels"]

@@ -115,6 +115,11 @@ class PulseShape:
         level = fraction * self.peak_w_per_j
         return float(np.interp(level, self.filtered[rising], t[rising]))
 
+    @property
+    def rise_time_10_90_s(self) -> float:
+        """10-90 % rise time of the band-limited pulse (see timing.rise_time_10_90_s)."""
+        return self.rising_time_s(0.9) - self.rising_time_s(0.1)
+
     def filtered_at(self, t_s):
         return self.lookup(self.filtered, t_s)
 
@@ -507,7 +512,7 @@ def _pair_table(shape: PulseShape, dt: float, t_d: float, k_att: float, raw: boo
     if key not in _PAIRS:
         if len(_PAIRS) > 64:
             _PAIRS.clear()
-        reach = PAIR_REACH * (shape.rising_time_s(0.9) - shape.rising_time_s(0.1))
+        reach = PAIR_REACH * shape.rise_time_10_90_s
         d, q = np.meshgrid(
             np.linspace(0.0, reach, PAIR_NODES), np.linspace(0.0, 1.0, PAIR_NODES), indexing="ij"
         )

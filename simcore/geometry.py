@@ -8,6 +8,7 @@ right-handed. Pixel (row i, col j) of an n x n array looks along the pinhole dir
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -474,7 +475,7 @@ def _corner_flags(block, pixels, step_m, steep_m, corners, face_part, r_mean, fu
     with np.errstate(invalid="ignore"):  # inf - inf is NaN: compares False
         twist = np.abs(c_range[0] + c_range[3] - c_range[1] - c_range[2])
         off = np.abs(r_mean - c_range.mean(axis=0))
-        change = np.hypot(c_range[1] - c_range[0], c_range[2] - c_range[0])
+        change = np.hypot(*_corner_slopes(c_range))
     flag |= (twist > step_m) | (off > step_m) | (change > steep_m)
     cos = np.concatenate([_quad(corners.cos_theta), block.cos_theta.T.reshape(shape)])
     flag |= cos.max(axis=0) - cos.min(axis=0) > COS_STEP
@@ -485,8 +486,14 @@ def _corner_flags(block, pixels, step_m, steep_m, corners, face_part, r_mean, fu
     return flag
 
 
-def cell_spread_m(block: HitBlock, pixels: int, corners: CornerSamples | None) -> np.ndarray:
-    """(n_pix,) standard deviation of the range over each sub-ray's cell of the pixel [m].
+def _corner_slopes(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Range change across a pixel along x and y from its corner ranges c = (top-left,
+    top-right, bottom-left, bottom-right), as _quad lays them out."""
+    return 0.5 * (c[1] - c[0] + c[3] - c[2]), 0.5 * (c[2] - c[0] + c[3] - c[1])
+
+
+def cell_spread_m(block: HitBlock, corners: CornerSamples | None = None) -> np.ndarray:
+    """(n,) standard deviation of the range over each sub-ray's cell of the pixel [m].
 
     A k x k grid of sub-rays samples a tilted surface at points; each stands for a cell 1/k of
     the pixel on a side over which the range changes by g/k (g, the range change across the
@@ -495,25 +502,20 @@ def cell_spread_m(block: HitBlock, pixels: int, corners: CornerSamples | None) -
     comes from the pixel's four corners where they all hit, else from the plane fitted to the
     sub-rays where they all hit (k > 1), else it is taken as 0.
     """
-    k = int(round(np.sqrt(block.subrays)))
-    hit = block.face >= 0
-    full = hit.all(axis=1)
-    gx = np.zeros(pixels * pixels)
-    gy = np.zeros(pixels * pixels)
+    k = math.isqrt(block.subrays)
+    gx = gy = np.zeros(len(block.pixel))
     if k > 1:  # the least-squares plane over the sub-pixel grid, slopes per pixel
         g = (np.arange(k) - (k - 1) / 2.0) / k
         x, y = np.tile(g, k), np.repeat(g, k)
-        r = np.where(hit, block.range_m, 0.0)
-        gx = np.where(full, r @ x / (x @ x), 0.0)
-        gy = np.where(full, r @ y / (y @ y), 0.0)
+        r = np.where(block.face >= 0, block.range_m, 0.0)
+        full = (block.face >= 0).all(axis=1)
+        gx = np.where(full, r @ (x / (x @ x)), 0.0)
+        gy = np.where(full, r @ (y / (y @ y)), 0.0)
     if corners is not None:
-        c = _quad(corners.range_m).reshape(
-            4, -1
-        )  # (top-left, top-right, bottom-left, bottom-right)
+        c = _quad(corners.range_m).reshape(4, -1)[:, block.pixel]
         ok = np.isfinite(c).all(axis=0)
-        c = np.where(ok, c, 0.0)
-        gx = np.where(ok, 0.5 * (c[1] - c[0] + c[3] - c[2]), gx)
-        gy = np.where(ok, 0.5 * (c[2] - c[0] + c[3] - c[1]), gy)
+        cx, cy = _corner_slopes(np.where(ok, c, 0.0))
+        gx, gy = np.where(ok, cx, gx), np.where(ok, cy, gy)
     return np.sqrt((gx**2 + gy**2) / 12.0) / k
 
 
@@ -565,5 +567,5 @@ def cast(
         dirs = subray_directions(rays.pixels, rays.fov_rad, refine_subrays, which)
         refined = cast_block(caster, which, dirs, pose)
     if cell_spread:
-        base = dataclasses.replace(base, spread_m=cell_spread_m(base, rays.pixels, corners))
+        base = dataclasses.replace(base, spread_m=cell_spread_m(base, corners))
     return Hits(base, refined, pose)

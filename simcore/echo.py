@@ -587,6 +587,8 @@ def merge_elements(arrivals_s, weights, window_s: float):
     weights = np.asarray(weights, dtype=np.float64)
     n, k = arrivals.shape
     has = weights > 0
+    if n == 0:
+        return np.zeros((0, 2)), np.zeros((0, 2))
     t0 = np.where(has, arrivals, np.inf).min(axis=1, keepdims=True)
     t0 = np.where(np.isfinite(t0), t0, 0.0)
     row = np.broadcast_to(np.arange(n)[:, None], (n, k))[has]

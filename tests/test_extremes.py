@@ -122,3 +122,27 @@ def test_a_target_larger_than_the_field_of_view_fills_it():
     res = run(distance_m=20.0, pixels=32, **{"fidelity.subrays": 1})
     assert res.summary()["n_hit_pixels"] > 0.8 * 32 * 32
     assert_finite(res)
+
+
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        {"distance_m": 1.0},  # inside the target
+        {"distance_m": 100_000.0},
+        {"pixels": 1},
+        {"pixels": 1024},
+        {"laser.pulse_width_s": 1e-10},
+        {"laser.pulse_width_s": 1e-7},
+        {"pitch_deg": 89.9},  # panels edge-on
+        {"pose.offset_x_m": 50.0},  # outside the field of view
+        {"transmit.illumination": "square"},
+        {"transmit.illumination": "gaussian"},
+    ],
+    ids=lambda o: ",".join(f"{k}={v}" for k, v in o.items()),
+)
+@pytest.mark.parametrize("preset", ["interactive", "balanced"])
+def test_the_adaptive_presets_stay_finite_at_the_extremes(preset, overrides):
+    """Corner probes, cell spreads, steep and beam-edge refinement at the edges of the space."""
+    res = run(preset=preset, **overrides)
+    assert_finite(res)
+    assert np.all(np.isfinite(res.echo.arrivals_s)) and np.all(res.echo.weights >= 0)

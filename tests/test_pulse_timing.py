@@ -240,3 +240,10 @@ def test_paper_eq25_with_the_band_limited_rise_time_is_24x_ours_even_with_c_over
     paper = timing.sigma_cfd_paper_m(10.0, 0.5, timing.rise_time_10_90_s(shape))
     assert timing.rise_time_10_90_s(shape) == pytest.approx(2.76e-9, abs=0.01e-9)
     assert paper / 2 / ours == pytest.approx(2.4, abs=0.05)
+
+
+def test_merging_and_splitting_no_pixels_gives_no_pixels():
+    t, w = echo.merge_elements(np.zeros((0, 4)), np.zeros((0, 4)), 1e-9)
+    assert t.shape[0] == w.shape[0] == 0
+    t, w = echo.split_elements(np.zeros((0, 4)), np.zeros((0, 4)), np.zeros(0))
+    assert t.shape == w.shape == (0, 8)

@@ -12,7 +12,7 @@ energy, so a pulse-energy change never re-runs this stage.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
 from scipy import constants as sc
@@ -115,7 +115,7 @@ class PulseShape:
         level = fraction * self.peak_w_per_j
         return float(np.interp(level, self.filtered[rising], t[rising]))
 
-    @property
+    @cached_property
     def rise_time_10_90_s(self) -> float:
         """10-90 % rise time of the band-limited pulse (see timing.rise_time_10_90_s)."""
         return self.rising_time_s(0.9) - self.rising_time_s(0.1)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -246,15 +247,24 @@ def _pulse_constant(scene: Scene) -> float:
     return echo.A_PAPER if scene.uses("pulse_constant") else echo.A_FWHM
 
 
+@lru_cache(maxsize=8)
+def _beam_edge(pixels: int, fov_rad: float, theta_ill_rad: float, model: str) -> np.ndarray:
+    """(pixels, pixels) bool: the edge of a flat-top or square beam crosses the pixel (its
+    corners are not all lit or all dark; never for a Gaussian beam). The same for every pose."""
+    gain = echo.illumination_gain(geometry.corner_directions(pixels, fov_rad), theta_ill_rad, model)
+    edge = geometry.straddles((gain > 0).reshape(pixels + 1, -1))
+    edge.setflags(write=False)
+    return edge
+
+
 def stage_hits(scene: Scene, tgt: TargetStage, rays: geometry.RayGrid) -> geometry.Hits:
     pose = geometry.target_pose(scene.pose, tgt.model.mesh.extents, tgt.model.body_from_mesh)
     fid = scene.fidelity
     lit_edge = None
-    if fid.refine_subrays > rays.subrays:  # pixels the edge of a flat-top or square beam crosses
-        gain = echo.illumination_gain(
-            rays.corner_directions, scene.illumination_angle_rad, scene.transmit.illumination
+    if fid.refine_subrays > rays.subrays:
+        lit_edge = _beam_edge(
+            rays.pixels, rays.fov_rad, scene.illumination_angle_rad, scene.transmit.illumination
         )
-        lit_edge = geometry.straddles((gain > 0).reshape(rays.pixels + 1, -1))
     # a pixel whose range changes by more than half the pulse's rise time (in range) across it
     # echoes a plateau: refined (about 21 cm for 5 ns at 120 MHz)
     shape = echo.pulse_shape(

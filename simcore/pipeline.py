@@ -260,17 +260,17 @@ def _beam_edge(pixels: int, fov_rad: float, theta_ill_rad: float, model: str) ->
 def stage_hits(scene: Scene, tgt: TargetStage, rays: geometry.RayGrid) -> geometry.Hits:
     pose = geometry.target_pose(scene.pose, tgt.model.mesh.extents, tgt.model.body_from_mesh)
     fid = scene.fidelity
-    lit_edge = None
+    lit_edge, steep_m = None, np.inf  # what refinement needs besides the mixed pixels
     if fid.refine_subrays > rays.subrays:
         lit_edge = _beam_edge(
             rays.pixels, rays.fov_rad, scene.illumination_angle_rad, scene.transmit.illumination
         )
-    # a pixel whose range changes by more than half the pulse's rise time (in range) across it
-    # echoes a plateau: refined (about 21 cm for 5 ns at 120 MHz)
-    shape = echo.pulse_shape(
-        scene.laser.pulse_width_s, _pulse_constant(scene), scene.detector.bandwidth_hz
-    )
-    steep_m = 0.5 * timing.rise_time_10_90_s(shape) * C / 2
+        # a pixel whose range changes by more than half the pulse's rise time (in range) across
+        # it echoes a plateau: refined (about 21 cm for 5 ns at 120 MHz)
+        shape = echo.pulse_shape(
+            scene.laser.pulse_width_s, _pulse_constant(scene), scene.detector.bandwidth_hz
+        )
+        steep_m = 0.5 * timing.rise_time_10_90_s(shape) * C / 2
     hits = geometry.cast(
         tgt.caster,
         rays,

@@ -3,7 +3,7 @@
     lmapd simulate [SCENE.toml] [--set NAME=VALUE ...] --out cloud.ply
                    [--summary summary.json] [--waveforms waveforms.npz]
     lmapd keys [--markdown]
-    lmapd bench [--quick] [--json FILE] [--tradeoff --out DIR]
+    lmapd bench [--quick] [--json FILE] [--tradeoff --out DIR [--pixels N]]
     lmapd app [--host 127.0.0.1] [--port 8080] [--scene SCENE]
     lmapd flyaround [SCENE.toml] [--set NAME=VALUE ...] --out DIR [--interval-s 300]
                     [--duration-s SECONDS] [--j2]
@@ -117,7 +117,9 @@ def cmd_bench(args) -> int:
             raise CliError("--tradeoff needs --out DIR")
         from . import tradeoff  # noqa: PLC0415
 
-        return tradeoff.main(args.out, quick=args.quick)
+        return tradeoff.main(args.out, quick=args.quick, pixels=args.pixels)
+    if args.pixels is not None:
+        raise CliError("--pixels is for --tradeoff (the stage bench runs its own sizes)")
     from . import bench  # noqa: PLC0415
 
     return bench.main(quick=args.quick, json_path=args.json)
@@ -170,6 +172,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="each preset's time against its error relative to reference (needs --out)",
     )
     bench.add_argument("--out", help="folder for tradeoff.json and tradeoff.png")
+    bench.add_argument(
+        "--pixels",
+        type=int,
+        help="array size per side for --tradeoff (default 256, the paper's; 128 with --quick)",
+    )
     bench.set_defaults(func=cmd_bench)
 
     app = sub.add_parser("app", help="serve the browser app (127.0.0.1:8080)")

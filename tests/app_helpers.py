@@ -4,7 +4,19 @@ from __future__ import annotations
 
 import time
 
+from hypothesis import strategies as st
+
 from app.main import LmapdApp
+
+# any value a page (or a hostile client) might send for a state variable
+ANYTHING = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(min_value=-(2**70), max_value=2**70),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.text(max_size=8),
+    st.lists(st.integers(), max_size=2),
+)
 
 
 def settle(app: LmapdApp, timeout_s: float = 60.0) -> None:

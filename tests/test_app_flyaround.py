@@ -8,7 +8,7 @@ import threading
 
 import numpy as np
 import pytest
-from app_helpers import change, settle
+from app_helpers import ANYTHING, change, settle
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -215,20 +215,10 @@ def test_a_frame_overtaken_while_computing_is_dropped_not_shown(app, monkeypatch
     assert frame_scene(app).pose.distance_m == pytest.approx(distance)
 
 
-_anything = st.one_of(
-    st.none(),
-    st.booleans(),
-    st.integers(min_value=-(2**70), max_value=2**70),
-    st.floats(allow_nan=True, allow_infinity=True),
-    st.text(max_size=8),
-    st.lists(st.integers(), max_size=2),
-)
-
-
 @settings(
     max_examples=200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
 )
-@given(raw=st.fixed_dictionaries({"mode": _anything, "t_s": _anything, "j2": _anything}))
+@given(raw=st.fixed_dictionaries({"mode": ANYTHING, "t_s": ANYTHING, "j2": ANYTHING}))
 def test_any_websocket_values_give_valid_fly_around_controls(poses, raw):
     controls, _ = sanitize_flyaround(raw, FlyaroundControls(), poses)
     assert controls.mode in MODES and isinstance(controls.j2, bool)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import pytest
+from app_helpers import ANYTHING
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -140,19 +141,9 @@ def test_materials_that_are_not_a_mapping_are_refused():
     assert controls.materials == PARTS and len(messages) == 1
 
 
-_anything = st.one_of(
-    st.none(),
-    st.booleans(),
-    st.integers(min_value=-(2**70), max_value=2**70),
-    st.floats(allow_nan=True, allow_infinity=True),
-    st.text(max_size=8),
-    st.lists(st.integers(), max_size=2),
-)
-
-
 @settings(max_examples=200, deadline=None)
 @given(
-    raw=st.fixed_dictionaries({key: _anything for key in [*SPECS, "subrays", "preset", "color_by"]})
+    raw=st.fixed_dictionaries({key: ANYTHING for key in [*SPECS, "subrays", "preset", "color_by"]})
 )
 def test_any_websocket_values_give_valid_controls_and_a_valid_scene(raw):
     controls, _ = sanitize_controls(raw, Controls())

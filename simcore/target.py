@@ -3,11 +3,21 @@ its part (submesh material or name) and the part's material from a material map.
 
 The target frame is the mesh's own axes, scaled to metres, with the origin at the centre of the
 bounding box (the body origin the lidar tracks).
+
+Reading a glTF with its textures costs more than the rest of a frame, so the geometry read from a
+mesh file (vertices, triangles, part of each triangle) is cached on disk, keyed by the SHA-256 of
+the file's content: ``$LMAPD_CACHE_DIR`` (``off`` disables it), else ``$XDG_CACHE_HOME/lmapd-sim``,
+else ``~/.cache/lmapd-sim``. Entries are written atomically; a stale one is never read (another
+content, another key), a corrupt one is rebuilt and an unwritable folder skipped, with a warning.
 """
 
 from __future__ import annotations
 
+import hashlib
+import os
 import tomllib
+import warnings
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -103,6 +113,132 @@ def _resolve(target: Target) -> tuple[Path, dict, Path | None]:
     return path, {"name": path.stem, "credit": ""}, None
 
 
+@dataclass(frozen=True)
+class MeshGeometry:
+    """What a mesh file holds for us, in the file's own units and axes.
+
+    Attributes
+    ----------
+    vertices : (n_vertices, 3) float64 -- positions [file units]
+    faces : (n_faces, 3) int64 -- vertex indices of each triangle
+    face_part : (n_faces,) int32 -- index into ``part_names`` of each triangle
+    part_names : tuple of str -- sorted part names (glTF material names, or ``part<i>``)
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    face_part: np.ndarray
+    part_names: tuple[str, ...]
+
+
+CACHE_FORMAT = 1  # bump when MeshGeometry or the way it is read from a file changes
+CACHE_ENV = "LMAPD_CACHE_DIR"
+CACHE_MAX_ENTRIES = 32  # the least recently written entries beyond this are removed
+
+
+def cache_dir() -> Path | None:
+    """The folder of the on-disk target cache, None when ``$LMAPD_CACHE_DIR`` is ``off``."""
+    chosen = os.environ.get(CACHE_ENV)
+    if chosen is not None:
+        return None if chosen.strip().lower() in ("", "off", "0", "none") else Path(chosen)
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "lmapd-sim"
+
+
+def _cache_file(folder: Path, content: bytes) -> Path:
+    digest = hashlib.sha256(content)
+    digest.update(f"format {CACHE_FORMAT} trimesh {trimesh.__version__}".encode())
+    return folder / "targets" / f"{digest.hexdigest()}.npz"
+
+
+def _read_cached(file: Path) -> MeshGeometry | None:
+    """The geometry cached in ``file``; None if there is none, a warning if it is corrupt."""
+    try:
+        with np.load(file, allow_pickle=False) as npz:
+            geometry = MeshGeometry(
+                vertices=npz["vertices"],
+                faces=npz["faces"],
+                face_part=npz["face_part"],
+                part_names=tuple(str(n) for n in npz["part_names"]),
+            )
+        n_vertices, n_faces = len(geometry.vertices), len(geometry.faces)
+        if (
+            geometry.vertices.shape != (n_vertices, 3)
+            or geometry.faces.shape != (n_faces, 3)
+            or geometry.face_part.shape != (n_faces,)
+            or (n_faces and not 0 <= geometry.faces.min() <= geometry.faces.max() < n_vertices)
+            or (n_faces and not 0 <= geometry.face_part.min() <= geometry.face_part.max())
+            or (n_faces and geometry.face_part.max() >= len(geometry.part_names))
+        ):
+            raise ValueError("inconsistent arrays")
+        return geometry
+    except (FileNotFoundError, NotADirectoryError):
+        return None
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+        warnings.warn(f"target cache {file} is corrupt ({exc}); rebuilt", stacklevel=3)
+        return None
+
+
+def _write_cached(file: Path, geometry: MeshGeometry) -> None:
+    """Write ``geometry`` to ``file`` atomically; an unwritable cache only warns."""
+    from .io import atomic_path  # noqa: PLC0415  (io loads the point-cloud writers)
+
+    try:
+        file.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(file) as tmp, open(tmp, "wb") as fh:
+            np.savez(
+                fh,
+                vertices=geometry.vertices,
+                faces=geometry.faces,
+                face_part=geometry.face_part,
+                part_names=np.array(geometry.part_names, dtype=str),
+            )
+        _prune(file.parent)
+    except OSError as exc:
+        warnings.warn(
+            f"target cache {file.parent} is not writable ({exc}); the mesh is read from its "
+            f"file each time (set {CACHE_ENV} to another folder, or to off)",
+            stacklevel=3,
+        )
+
+
+def _prune(folder: Path) -> None:
+    """Keep the CACHE_MAX_ENTRIES most recently written entries of ``folder``."""
+    entries = sorted(folder.glob("*.npz"), key=lambda f: f.stat().st_mtime, reverse=True)
+    for old in entries[CACHE_MAX_ENTRIES:]:
+        old.unlink(missing_ok=True)
+
+
+def mesh_geometry(path: Path) -> MeshGeometry:
+    """The geometry of the mesh file ``path``, from the on-disk cache when it holds it."""
+    folder = cache_dir()
+    if folder is None:
+        return _read_geometry(path)
+    try:
+        content = path.read_bytes()
+    except OSError as exc:
+        raise TargetError(f"{path}: cannot read the mesh ({exc.strerror or exc})") from None
+    file = _cache_file(folder, content)
+    geometry = _read_cached(file)
+    if geometry is None:
+        geometry = _read_geometry(path)
+        _write_cached(file, geometry)
+    return geometry
+
+
+def _read_geometry(path: Path) -> MeshGeometry:
+    """Read a mesh file: every triangle, and the part it belongs to."""
+    parts = _read_parts(path)
+    if not parts:
+        return MeshGeometry(np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int32), ())
+    vertices = np.concatenate([g.vertices for _, g in parts]).astype(np.float64)
+    offsets = np.cumsum([0] + [len(g.vertices) for _, g in parts[:-1]])
+    faces = np.concatenate([g.faces + o for (_, g), o in zip(parts, offsets, strict=True)])
+    names = sorted({n for n, _ in parts})
+    face_part = np.concatenate([np.full(len(g.faces), names.index(n), np.int32) for n, g in parts])
+    return MeshGeometry(vertices, faces.astype(np.int64), face_part, tuple(names))
+
+
 def _read_parts(path: Path) -> list[tuple[str, trimesh.Trimesh]]:
     """Read a mesh file as (part name, mesh) pairs with scene transforms applied."""
     try:
@@ -133,20 +269,19 @@ def load_target(target: Target) -> TargetModel:
         Missing file, unreadable or empty mesh, NaN/inf vertices, zero total area, too many faces.
     """
     path, settings, folder = _resolve(target)
-    parts = _read_parts(path)
-    n_faces = sum(len(g.faces) for _, g in parts)
+    geometry = mesh_geometry(path)
+    n_faces = len(geometry.faces)
     if n_faces == 0:
         raise TargetError(f"{path}: the mesh has no triangles")
     if n_faces > MAX_FACES:
         raise TargetError(f"{path}: {n_faces} triangles is more than the {MAX_FACES} allowed")
-    vertices = np.concatenate([g.vertices for _, g in parts]).astype(np.float64)
-    if not np.isfinite(vertices).all():
+    if not np.isfinite(geometry.vertices).all():
         raise TargetError(f"{path}: the mesh has NaN or infinite vertex coordinates")
-    offsets = np.cumsum([0] + [len(g.vertices) for _, g in parts[:-1]])
-    faces = np.concatenate([g.faces + o for (_, g), o in zip(parts, offsets, strict=True)])
-    names = sorted({n for n, _ in parts})
-    face_part = np.concatenate([np.full(len(g.faces), names.index(n), np.int32) for n, g in parts])
-    mesh = trimesh.Trimesh(vertices, faces, process=False, validate=False)
+    names, face_part = list(geometry.part_names), geometry.face_part
+    # copies: the mesh is scaled and centred in place below
+    mesh = trimesh.Trimesh(
+        geometry.vertices.copy(), geometry.faces.copy(), process=False, validate=False
+    )
     if not mesh.area > 0:
         raise TargetError(f"{path}: the mesh has zero surface area (degenerate triangles)")
 

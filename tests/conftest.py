@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 import trimesh
@@ -42,3 +44,10 @@ def plate_scene(tmp_path):
         return simcore.with_overrides(simcore.Scene(), base)
 
     return make
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _target_cache(tmp_path_factory):
+    """The tests' on-disk target cache is their own (fresh each session, never the user's)."""
+    os.environ["LMAPD_CACHE_DIR"] = str(tmp_path_factory.mktemp("lmapd-cache"))
+    yield

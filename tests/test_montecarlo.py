@@ -301,7 +301,8 @@ def test_a_sampled_comparator_misses_between_sample_excursions_and_counts_fewer(
 def test_curvature_preselection_finds_every_between_sample_excursion(monkeypatch):
     n_pixels = 300
     pre, _ = noise_only(n_pixels, 2.0, seed=41, holdoff_s=0.0)
-    monkeypatch.setattr(montecarlo.discriminator, "ARMING_CURVATURE", 1e9)  # every pair within the margin
+    # every pair within the margin
+    monkeypatch.setattr(montecarlo.discriminator, "ARMING_CURVATURE", 1e9)
     every, _ = noise_only(n_pixels, 2.0, seed=41, holdoff_s=0.0)
     np.testing.assert_array_equal(pre.false_alarm_pixel, every.false_alarm_pixel)
     np.testing.assert_array_equal(pre.false_alarm_range_m, every.false_alarm_range_m)

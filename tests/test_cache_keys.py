@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import trimesh
 from ideal_receiver import IDEAL, KIND
 
 import simcore
@@ -100,10 +101,22 @@ def test_every_key_of_the_reference_has_an_alternative_value():
     assert keys == set(ALTERNATIVES) | {"paper_forms"}
 
 
+def write_plates(path, plates) -> str:
+    """Square plates (size_m, z_offset_m, tilt_deg about y) facing the lidar, as one OBJ."""
+    meshes = []
+    for size_m, z_m, tilt_deg in plates:
+        box = trimesh.creation.box(extents=(size_m, size_m, 1e-3))
+        box.apply_transform(
+            trimesh.transformations.rotation_matrix(np.radians(tilt_deg), (0, 1, 0))
+        )
+        box.apply_translation((0, 0, z_m))
+        meshes.append(box)
+    trimesh.util.concatenate(meshes).export(path)
+    return str(path)
+
+
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
-    from conftest import write_plates
-
     folder = tmp_path_factory.mktemp("keys")
     plate = write_plates(folder / "plate.obj", [(4.0, 0.0, 25.0), (1.5, -0.4, -10.0)])
     other = write_plates(folder / "other.obj", [(3.0, 0.0, -20.0)])

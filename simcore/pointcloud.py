@@ -3,8 +3,17 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+from .stage import Stage
+
+if TYPE_CHECKING:
+    from .echo import EchoStage
+    from .geometry import RayGrid
+    from .receivers import Detection, Response
+    from .scene import Scene
 
 ATTRIBUTES = (
     ("row", np.int32),
@@ -62,3 +71,30 @@ def assemble_cloud(
         "is_outlier": np.concatenate([np.zeros(n_t, bool), np.ones(n_o, bool)]),
     }
     return PointCloud(points, attrs)
+
+
+def stage_cloud(
+    scene: Scene, rays: RayGrid, echo: EchoStage, response: Response, det: Detection
+) -> PointCloud:
+    """The cloud stage: detected target pixels at their measured ranges, then the outliers."""
+    k = det.detected
+    return assemble_cloud(
+        rays.pixel_directions,
+        rays.pixels,
+        echo.pixel[k],
+        det.range_m[k],
+        response.peak_power_w[k],
+        response.snr[k],
+        echo.material_id[k],
+        echo.facet_id[k],
+        det.outliers.pixel,
+        det.outliers.range_m,
+    )
+
+
+CLOUD = Stage(
+    name="cloud",
+    upstream=("rays", "echo", "receiver", "detection"),
+    reads=lambda s: (),
+    compute=stage_cloud,
+)

@@ -20,6 +20,8 @@ from typing import Any
 
 import tomli_w
 
+from .receivers import DEFAULT_KIND, kinds
+
 ASSETS_DIR = Path(__file__).resolve().parent.parent / "assets"
 SCENES_DIR = ASSETS_DIR / "scenes"
 
@@ -29,7 +31,8 @@ class SceneError(ValueError):
 
 
 def _f(default, unit: str, lo=None, hi=None, doc: str = "", choices=None, lo_open=False):
-    """A dataclass field with unit, valid range [lo, hi] (or (lo, hi] if lo_open) and a doc line."""
+    """A dataclass field with unit, valid range [lo, hi] (or (lo, hi] if lo_open) and a doc line.
+    ``choices``: the valid values, or a function that returns them (a registry's)."""
     meta = {"unit": unit, "lo": lo, "hi": hi, "doc": doc, "choices": choices, "lo_open": lo_open}
     if isinstance(default, (list, dict)):
         raise TypeError("mutable default")
@@ -209,6 +212,16 @@ class Fidelity:
     )
 
 
+@dataclass(frozen=True)
+class ReceiverSelection:
+    kind: str = _f(
+        DEFAULT_KIND,
+        "-",
+        doc="the receiver behind the optics: lm_apd (the linear-mode APD chain, Eqs. 7-28)",
+        choices=kinds,
+    )
+
+
 PAPER_FORMS = (
     "pulse_constant",  # Eq. 1: a = 3.5 instead of 2.446 (tau is then not the FWHM)
     "eq30_4pi",  # Eq. 30: extra 1/(4 pi) and no cos(theta)
@@ -290,6 +303,7 @@ class Scene:
     target: Target = field(default_factory=Target)
     pose: Pose = field(default_factory=Pose)
     fidelity: Fidelity = field(default_factory=Fidelity)
+    receiver: ReceiverSelection = field(default_factory=ReceiverSelection)
 
     def __post_init__(self):
         validate(self)
@@ -319,7 +333,9 @@ class Scene:
         return self.timing.gate_center_m or self.pose.distance_m
 
     def to_dict(self) -> dict[str, Any]:
-        """Every resolved parameter as a plain, JSON- and TOML-ready dict."""
+        """Every resolved parameter as a plain, JSON- and TOML-ready dict (the receiver section
+        only for a receiver other than the default lm_apd: LM-APD scenes read as before the key
+        existed)."""
         return _to_plain(self)
 
 
@@ -333,6 +349,7 @@ SECTIONS = {
     "target": Target,
     "pose": Pose,
     "fidelity": Fidelity,
+    "receiver": ReceiverSelection,
 }
 
 # The quick parameters shared by the CLI --set, the app state and the Python keyword API.
@@ -380,16 +397,22 @@ def _validate_fields(obj, prefix: str, names=None) -> None:
         value = getattr(obj, f.name)
         values = value if isinstance(value, tuple) else (value,)
         if meta["choices"] is not None:
+            choices = _choices(meta)
             for v in values:
-                if v not in meta["choices"]:
+                if v not in choices:
                     raise SceneError(
-                        f"{key} = {v!r} is not valid; choose from {', '.join(meta['choices'])}"
+                        f"{key} = {v!r} is not valid; choose from {', '.join(choices)}"
                     )
         elif meta["lo"] is not None:
             if not values:
                 raise SceneError(f"{key}: needs at least one value")
             for v in values:
                 _check_number(key, v, meta, integer=isinstance(f.default, int))
+
+
+def _choices(meta) -> tuple:
+    choices = meta["choices"]
+    return tuple(choices()) if callable(choices) else choices
 
 
 def validate(scene: Scene) -> None:
@@ -596,6 +619,8 @@ def _to_plain(obj, inf_as_text: bool = True):
         out = {}
         for f in dataclasses.fields(obj):
             v = getattr(obj, f.name)
+            if f.name == "receiver" and v == ReceiverSelection():
+                continue  # the default receiver: written as before the key existed
             out[f.name] = dict(v) if f.name == "materials" else _to_plain(v, inf_as_text)
         return out
     if isinstance(obj, tuple):
@@ -625,7 +650,7 @@ def key_reference() -> list[dict[str, str]]:
 def _row(key, f):
     m = f.metadata
     if m["choices"] is not None:
-        valid = " / ".join(m["choices"])
+        valid = " / ".join(_choices(m))
     elif m["lo"] is not None:
         valid = _range_text(m)
     else:

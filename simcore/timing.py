@@ -7,15 +7,15 @@ from __future__ import annotations
 import numpy as np
 from scipy import constants as sc
 
-from .echo import PulseShape
+from .pulse import PulseShape
 
 C = sc.c  # speed of light [m/s]
 
 
 def cfd_delay_s(shape: PulseShape, delay_s: float = 0.0) -> float:
     """Eq. 19 default delay t_d = t_peak - t_half of the band-limited reference pulse (2.24 ns for
-    the paper's 5 ns pulse at 120 MHz): with k_att = 0.5 the CFD then fires when the delayed copy is
-    at half its peak, the instant of Eq. 31. A positive ``delay_s`` overrides it."""
+    the paper's 5 ns pulse at 120 MHz): with a CFD fraction of 0.5 the CFD then fires when the
+    delayed copy is at half its peak, the instant of Eq. 31. A positive ``delay_s`` overrides it."""
     return delay_s if delay_s > 0 else shape.t_peak_s - shape.t_half_s
 
 
@@ -29,23 +29,25 @@ def noise_autocorrelation(lag_s: float, sigma_h_s: float) -> float:
     return float(np.exp(-(lag_s**2) / (4.0 * sigma_h_s**2)))
 
 
-def sigma_cfd_m(snr, slope_per_s, k_att: float, t_d: float, sigma_h_s: float):
-    """Eq. 25 (ours): (c/2) sqrt(1 + k^2 - 2 k rho_n(t_d)) / (SNR |ds/dt|)   [m].
+def sigma_cfd_m(snr, slope_per_s, cfd_fraction: float, delay_s: float, sigma_h_s: float):
+    """Eq. 25 (ours): (c/2) sqrt(1 + k^2 - 2 k rho_n(t_d)) / (SNR |ds/dt|)   [m], k the CFD
+    fraction, t_d = ``delay_s`` the CFD delay [s].
 
     snr : (n,) SNR_na; slope_per_s : (n,) |ds/dt| of the peak-normalised CFD signal at its firing
     time. Zero SNR or slope gives inf (the pixel is then not detected anyway).
     """
-    rho = noise_autocorrelation(t_d, sigma_h_s)
-    num = 0.5 * C * np.sqrt(1.0 + k_att**2 - 2.0 * k_att * rho)
+    rho = noise_autocorrelation(delay_s, sigma_h_s)
+    num = 0.5 * C * np.sqrt(1.0 + cfd_fraction**2 - 2.0 * cfd_fraction * rho)
     den = np.asarray(snr, dtype=np.float64) * np.asarray(slope_per_s, dtype=np.float64)
     with np.errstate(divide="ignore"):
         return np.where(den > 0, num / np.where(den > 0, den, 1.0), np.inf)
 
 
-def sigma_cfd_paper_m(snr, k_att: float, rise_time_s: float):
+def sigma_cfd_paper_m(snr, cfd_fraction: float, rise_time_s: float):
     """Eq. 25 as printed: c tau_r sqrt(1 + k^2) / (SNR (1 - k))   [m] (with c, not c/2)."""
     snr = np.asarray(snr, dtype=np.float64)
-    num = C * rise_time_s * np.sqrt(1.0 + k_att**2) / (1.0 - k_att) if k_att < 1 else np.inf
+    k = cfd_fraction
+    num = C * rise_time_s * np.sqrt(1.0 + k**2) / (1.0 - k) if k < 1 else np.inf
     with np.errstate(divide="ignore"):
         return np.where(snr > 0, num / np.where(snr > 0, snr, 1.0), np.inf)
 

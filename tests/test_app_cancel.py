@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 
 import pytest
@@ -44,14 +45,18 @@ def test_an_overtaken_computation_is_dropped_without_an_error(model, monkeypatch
         app.state.ready()
         assert app.logic.runner.wait_idle(60)
         entered, release = threading.Event(), threading.Event()
-        stage_rays = simcore.pipeline.stage_rays
+        chain = simcore.pipeline.CHAIN
+        rays = next(stage for stage in chain if stage.name == "rays")
 
         def slow_rays(s):
             entered.set()
             release.wait(10)
-            return stage_rays(s)
+            return rays.compute(s)
 
-        monkeypatch.setattr(simcore.pipeline, "stage_rays", slow_rays)
+        slow = dataclasses.replace(rays, compute=slow_rays)
+        monkeypatch.setattr(
+            simcore.pipeline, "CHAIN", tuple(slow if s is rays else s for s in chain)
+        )
         dropped = app.logic.runner.n_dropped
         with app.state:
             app.state.pixels = 48  # new rays: the worker blocks in the rays stage

@@ -4,6 +4,7 @@ dropped."""
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 
 import numpy as np
@@ -193,14 +194,16 @@ def test_leaving_fly_around_mode_stops_playing_and_a_failed_frame_pauses(app, mo
 def test_a_frame_overtaken_while_computing_is_dropped_not_shown(app, monkeypatch):
     change(app, mode="flyaround", fly_t_s=0)
     entered, release = threading.Event(), threading.Event()
-    stage_hits = simcore.pipeline.stage_hits
+    chain = simcore.pipeline.CHAIN
+    hits = next(stage for stage in chain if stage.name == "hits")
 
     def slow_hits(*args):
         entered.set()
         release.wait(10)
-        return stage_hits(*args)
+        return hits.compute(*args)
 
-    monkeypatch.setattr(simcore.pipeline, "stage_hits", slow_hits)
+    slow = dataclasses.replace(hits, compute=slow_hits)
+    monkeypatch.setattr(simcore.pipeline, "CHAIN", tuple(slow if s is hits else s for s in chain))
     pushed, dropped = app.logic.n_frames_pushed, app.logic.runner.n_dropped
     with app.state:
         app.state.fly_t_s = 300

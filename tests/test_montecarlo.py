@@ -17,7 +17,7 @@ from scipy import integrate, stats
 
 import simcore
 from simcore import detection, echo, montecarlo, receiver, timing
-from simcore.pipeline import EchoStage
+from simcore.echo import EchoStage
 
 C = sc.c
 SCENE = simcore.Scene()
@@ -301,7 +301,8 @@ def test_a_sampled_comparator_misses_between_sample_excursions_and_counts_fewer(
 def test_curvature_preselection_finds_every_between_sample_excursion(monkeypatch):
     n_pixels = 300
     pre, _ = noise_only(n_pixels, 2.0, seed=41, holdoff_s=0.0)
-    monkeypatch.setattr(montecarlo, "ARMING_CURVATURE", 1e9)  # every pair within the margin
+    # every pair within the margin
+    monkeypatch.setattr(montecarlo.discriminator, "ARMING_CURVATURE", 1e9)
     every, _ = noise_only(n_pixels, 2.0, seed=41, holdoff_s=0.0)
     np.testing.assert_array_equal(pre.false_alarm_pixel, every.false_alarm_pixel)
     np.testing.assert_array_equal(pre.false_alarm_range_m, every.false_alarm_range_m)
@@ -394,7 +395,18 @@ def test_eq26_quantisation_spread_at_huge_snr():
 def synthetic_echo_stage(pixel, arrivals, weights):
     feats = echo.echo_features(SHAPE, arrivals, weights, DT, T_D, K_ATT)
     zeros = np.zeros(len(pixel), dtype=np.int32)
-    return EchoStage(None, SHAPE, DT, T_D, pixel, arrivals, weights, feats, zeros, zeros)
+    return EchoStage(
+        model=None,
+        shape=SHAPE,
+        dt_s=DT,
+        cfd_delay_s=T_D,
+        pixel=pixel,
+        arrivals_s=arrivals,
+        weights=weights,
+        features=feats,
+        material_id=zeros,
+        facet_id=zeros,
+    )
 
 
 def test_montecarlo_detection_runs_one_flash_of_a_scene_reproducibly():
@@ -453,7 +465,7 @@ def test_bad_inputs_are_refused():
             gate_m=10.0,
             tnr=3.0,
             t_d_s=T_D,
-            k_att=K_ATT,
+            cfd_fraction=K_ATT,
             resolution_s=T_T,
         )
     with pytest.raises(ValueError, match="n_samples"):

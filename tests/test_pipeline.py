@@ -1,5 +1,7 @@
 """The staged pipeline: caching, reproducibility, the MRO scene, invariants of the scene space."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 import threadpoolctl
@@ -159,10 +161,11 @@ def test_a_frame_runs_with_blas_single_threaded_and_restores_it(plate_scene, mon
     before = blas_threads()
     assert before  # numpy's BLAS is loaded
     seen = []
-    stage_cloud = pipeline.stage_cloud
-    monkeypatch.setattr(
-        pipeline, "stage_cloud", lambda *a: seen.append(blas_threads()) or stage_cloud(*a)
+    cloud = next(stage for stage in pipeline.CHAIN if stage.name == "cloud")
+    spy = dataclasses.replace(
+        cloud, compute=lambda *a: seen.append(blas_threads()) or cloud.compute(*a)
     )
+    monkeypatch.setattr(pipeline, "CHAIN", tuple(spy if s is cloud else s for s in pipeline.CHAIN))
     simcore.Pipeline().run(plate_scene())
     assert seen and all(n == 1 for n in seen[0])
     assert blas_threads() == before

@@ -1,0 +1,204 @@
+"""The echo stage (Eqs. 29-30): per-pixel sub-ray delays and weights, and the features of each
+pixel's band-limited echo, per joule of pulse energy. What it hands the receiver is
+:class:`EchoStage` (features for every lit pixel, full waveforms on demand).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import constants as sc
+
+from .. import geometry, materials, timing
+from ..pulse import PulseShape, default_time_step_s, scene_pulse_shape
+from ..scene import Scene
+from ..stage import Stage, readonly
+from ..target import TargetModel, with_materials
+from .elements import element_weights, illumination_gain, merge_elements, split_elements
+from .features import EchoFeatures, echo_features
+
+C = sc.c  # speed of light [m/s]
+
+
+@dataclass(frozen=True, kw_only=True)
+class EchoStage:
+    """What the echo stage hands a receiver: the echoes of the pixels that receive light, per
+    joule of pulse energy (received power scales linearly with it).
+
+    model : the target with the scene's materials
+    shape : the emitted pulse and its band-limited reference copy (tables per joule)
+    dt_s : waveform time step [s]
+    cfd_delay_s : CFD delay t_d in force (Eq. 19) [s]
+    pixel : (n,) int64 flat index (row * pixels + col) of each lit pixel, ascending
+    arrivals_s : (n, K) two-way delay of each element (Eq. 29) [s]; 0 where its weight is 0
+    weights : (n, K) Eq. 30 weight of each element [1] (0 = no light)
+    features : per-pixel band-limited features (peak [W/J], half-maximum time, CFD slope)
+    material_id, facet_id : (n,) int32 of each pixel's strongest element (material ids index
+        ``materials.MATERIAL_NAMES``)
+    """
+
+    model: TargetModel
+    shape: PulseShape
+    dt_s: float
+    cfd_delay_s: float
+    pixel: np.ndarray
+    arrivals_s: np.ndarray
+    weights: np.ndarray
+    features: EchoFeatures
+    material_id: np.ndarray
+    facet_id: np.ndarray
+
+    def waveform_per_j(self, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Lit pixel ``i``'s full echo on its own window: t_s (L,) [s], unfiltered P_r (L,) and
+        band-limited y (L,) [W/J]."""
+        return echo_waveform(self.shape, self.arrivals_s[i], self.weights[i], self.dt_s)
+
+
+def echo_waveform(shape: PulseShape, arrivals_s, weights, dt: float):
+    """One pixel's full echo on its own window, for display and export.
+
+    arrivals_s, weights : (K,) -- one pixel's sub-ray delays [s] and weights
+    Returns t_s (L,), raw P_r per joule (L,), band-limited y per joule (L,).
+    """
+    arrivals = np.asarray(arrivals_s, dtype=np.float64)
+    weights = np.asarray(weights, dtype=np.float64)
+    has = weights > 0
+    if not has.any():
+        return np.zeros(0), np.zeros(0), np.zeros(0)
+    a, w = arrivals[has], weights[has]
+    t = np.arange(a.min() + shape.t_start_s, a.max() + shape.t_end_s, dt)
+    tau = t[:, None] - a[None, :]
+    return t, shape.raw_at(tau) @ w, shape.filtered_at(tau) @ w
+
+
+def stage_echo(scene: Scene, tgt: geometry.TargetStage, hits: geometry.Hits) -> EchoStage:
+    """Every lit pixel's elements and echo features, blocks of equal sub-ray counts merged."""
+    model = with_materials(tgt.model, scene.target.materials)
+    shape = scene_pulse_shape(scene)
+    dt_s = scene.fidelity.time_step_s or default_time_step_s(
+        scene.laser.pulse_width_s, scene.detector.bandwidth_hz
+    )
+    t_d_s = timing.cfd_delay_s(shape, scene.timing.cfd_delay_s)
+    blocks = [_echo_block(scene, model, b, shape, dt_s, t_d_s) for b in hits.blocks()]
+    pixel = np.concatenate([b["pixel"] for b in blocks])
+    order = np.argsort(pixel, kind="stable")
+    k_max = max(b["weights"].shape[1] for b in blocks)
+
+    def merged(name, pad_value=0.0):
+        parts = [b[name] for b in blocks]
+        if parts[0].ndim == 2:  # pad the sub-ray axis to the largest K (weight 0: no light)
+            parts = [
+                np.pad(p, ((0, 0), (0, k_max - p.shape[1])), constant_values=pad_value)
+                for p in parts
+            ]
+        return np.concatenate(parts)[order]
+
+    raw = scene.uses("unfiltered_peak")
+    feats = EchoFeatures(
+        peak_w_per_j=merged("peak"),
+        t_half_s=merged("t_half"),
+        cfd_slope_per_s=merged("slope"),
+        peak_raw_w_per_j=merged("peak_raw") if raw else None,
+    )
+    arrivals, weights = merged("arrivals"), merged("weights")
+    readonly(arrivals, weights)
+    return EchoStage(
+        model=model,
+        shape=shape,
+        dt_s=dt_s,
+        cfd_delay_s=t_d_s,
+        pixel=pixel[order],
+        arrivals_s=arrivals,
+        weights=weights,
+        features=feats,
+        material_id=merged("material_id"),
+        facet_id=merged("facet_id"),
+    )
+
+
+def _echo_block(
+    scene, model, block: geometry.HitBlock, shape, dt_s, cfd_delay_s
+) -> dict[str, np.ndarray]:
+    """Echo features of one block of pixels sampled with the same number of sub-rays."""
+    rows = np.flatnonzero((block.face >= 0).any(axis=1))  # pixels that see the target
+    face, range_m, cos_t = block.face[rows], block.range_m[rows], block.cos_theta[rows]
+    lit_gain = illumination_gain(
+        block.directions[rows], scene.illumination_angle_rad, scene.transmit.illumination
+    )
+    hit = face >= 0
+    mat = np.full(face.shape, -1, np.int64)
+    mat[hit] = model.face_material_library[face[hit]]
+    params = materials.parameter_table(materials.MATERIAL_NAMES)[mat[hit]]
+    rho = np.zeros(face.shape)
+    rho[hit] = materials.brdf(cos_t[hit], *params.T)
+    weights = element_weights(
+        range_m,
+        cos_t,
+        rho,
+        lit_gain,
+        aperture_area_m2=np.pi * scene.receive.aperture_diameter_m**2 / 4.0,
+        eta_t=scene.transmit.transmittance,
+        eta_r=scene.receive.transmittance,
+        ifov_rad=scene.ifov_rad,
+        subrays=block.subrays,
+        paper_4pi=scene.uses("eq30_4pi"),
+    )
+    keep = (weights > 0).any(axis=1)
+    weights, face, mat, rows = weights[keep], face[keep], mat[keep], rows[keep]
+    if scene.uses("eq29_one_way"):  # relief along the boresight, one way (the paper's print)
+        distance = scene.pose.distance_m
+        arrivals = 2.0 * distance / C + (block.depth_m[rows] - distance) / C
+    else:
+        arrivals = 2.0 * range_m[keep] / C
+    arrivals = np.where(weights > 0, arrivals, 0.0)
+    strongest = np.argmax(weights, axis=1)[:, None]
+    material_id = np.take_along_axis(mat, strongest, axis=1)[:, 0]
+    facet_id = np.take_along_axis(face, strongest, axis=1)[:, 0]
+    if block.spread_m is not None:  # each sub-ray's cell: a pair of half echoes +- its spread
+        arrivals, weights = split_elements(arrivals, weights, 2.0 * block.spread_m[rows] / C)
+    window = scene.fidelity.merge_window * timing.rise_time_10_90_s(shape)
+    if window > 0 and arrivals.shape[1] > 2:
+        arrivals, weights = merge_elements(arrivals, weights, window)
+    feats = echo_features(
+        shape,
+        arrivals,
+        weights,
+        dt_s,
+        cfd_delay_s,
+        scene.timing.cfd_fraction,
+        raw_peak=scene.uses("unfiltered_peak"),
+    )
+    return {
+        "pixel": block.pixel[rows],
+        "arrivals": arrivals,
+        "weights": weights,
+        "peak": feats.peak_w_per_j,
+        "t_half": feats.t_half_s,
+        "slope": feats.cfd_slope_per_s,
+        "peak_raw": feats.peak_raw_w_per_j if feats.peak_raw_w_per_j is not None else None,
+        "material_id": material_id.astype(np.int32),
+        "facet_id": facet_id.astype(np.int32),
+    }
+
+
+def _reads(s: Scene) -> tuple:
+    """Every scene value the echo stage reads (the target, pose and pixels come through hits)."""
+    return (
+        s.laser.pulse_width_s,
+        s.laser.divergence_rad,
+        s.transmit,
+        s.receive,
+        s.target.materials,
+        s.detector.bandwidth_hz,
+        s.detector.pixels,
+        s.pose.distance_m,
+        s.fidelity.time_step_s,
+        s.fidelity.merge_window,
+        s.timing.cfd_fraction,
+        s.timing.cfd_delay_s,
+        tuple(s.uses(f) for f in ("pulse_constant", "eq30_4pi", "eq29_one_way", "unfiltered_peak")),
+    )
+
+
+ECHO = Stage(name="echo", upstream=("target", "hits"), reads=_reads, compute=stage_echo)

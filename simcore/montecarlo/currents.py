@@ -1,0 +1,179 @@
+"""Noisy currents through the band limit (PHYSICS.md section 5, step 1): the white current
+samples of the one-sided noise density, the signal current, the Gaussian h_B convolution."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import signal
+
+from ..pulse import band_limit_sigma_s
+from ..receiver import Q_E, ReceiverModel
+
+KERNEL_HALF_WIDTH_SIGMA = 6.0  # h_B truncated at +-6 sigma_h: 2e-9 of its area is lost
+
+
+@dataclass(frozen=True)
+class BandLimit:
+    """The Gaussian impulse response ``h_B`` sampled at ``dt``, normalised to unit area.
+
+    taps : (2 m + 1,) float64 -- ``h_B(l dt) dt`` for l = -m..m, summing to 1 [1]
+    """
+
+    dt_s: float
+    sigma_h_s: float
+    taps: np.ndarray
+
+    @property
+    def half_width(self) -> int:
+        """m, the number of taps either side of the centre."""
+        return (len(self.taps) - 1) // 2
+
+    def shifted_taps(self, n_sub: int) -> np.ndarray:
+        """Taps of ``h_B`` delayed by q dt / n_sub, q = 1..n_sub-1: (n_sub - 1, 2 m + 1) [1].
+
+        With them ``y(t_j + q dt / n_sub) = sum_l taps_q[l] x[j + 2 m - l]`` on the padded input
+        ``x`` (the same sum as the sampled output, at a fractional delay)."""
+        m = self.half_width
+        lag = np.arange(-m, m + 1)[None, :] + (np.arange(1, n_sub)[:, None] / n_sub)
+        g = np.exp(-0.5 * (lag * (self.dt_s / self.sigma_h_s)) ** 2)
+        norm = np.exp(-0.5 * (np.arange(-m, m + 1) * (self.dt_s / self.sigma_h_s)) ** 2).sum()
+        return g / norm
+
+
+def band_limit(dt_s: float, bandwidth_hz: float) -> BandLimit:
+    """``h_B`` of noise-equivalent bandwidth B (sigma_h = 1 / (4 sqrt(pi) B)) sampled at dt_s."""
+    if not dt_s > 0:
+        raise ValueError(f"time step dt_s = {dt_s!r} must be positive")
+    sigma = band_limit_sigma_s(bandwidth_hz)
+    m = max(1, math.ceil(KERNEL_HALF_WIDTH_SIGMA * sigma / dt_s))
+    g = np.exp(-0.5 * (np.arange(-m, m + 1) * (dt_s / sigma)) ** 2)
+    taps = g / g.sum()
+    taps.setflags(write=False)
+    return BandLimit(float(dt_s), float(sigma), taps)
+
+
+def noise_density_a2_hz(i_signal_a, receiver: ReceiverModel):
+    """One-sided current noise density at the discriminator, input-referred [A^2/Hz]:
+    ``S = F_chain [2 q (i_s M F + I_ds + I_db M^2 F) + 4 k T / R_L]`` (Eqs. 10-13, 18).
+
+    The signal-free part is ``sigma_n^2 / B``; the shot part ``2 q M F i_s F_chain`` (Eq. 10).
+    i_signal_a : (...) signal current i_s = R_resp P_r [A] (negative values count as 0)
+    """
+    i = np.maximum(np.asarray(i_signal_a, dtype=np.float64), 0.0)
+    return receiver.sigma_n_a**2 / receiver.bandwidth_hz + _shot_density_per_a(receiver) * i
+
+
+def _shot_density_per_a(receiver: ReceiverModel) -> float:
+    """dS/di_s = F_chain 2 q M F   [A^2/Hz per A]."""
+    return receiver.chain_noise_factor * 2.0 * Q_E * receiver.gain * receiver.excess_noise
+
+
+def noisy_band_limited(
+    rng: np.random.Generator | None,
+    x: np.ndarray,
+    receiver: ReceiverModel | None,
+    band: BandLimit,
+    noise: bool,
+) -> np.ndarray:
+    """Add the white current noise to the padded signal ``x`` IN PLACE, band-limit it.
+
+    x : (n, L + 2 m) signal current i_s [A] with m = band.half_width samples either side of the
+        output window; becomes signal + white noise (the input of h_B).
+    Returns y : (n, L) band-limited current [A] ('valid' convolution: y[j] is at x's sample j + m).
+
+    The white sample variance ``S(t) / (2 dt)`` is drawn as a signal-free part for every sample
+    plus an independent shot part where i_s > 0: the same normal law. The convolution is linear,
+    so h_B * (i_s + n) is computed as h_B * n over the whole rows (FFT, in x's dtype) plus
+    h_B * i_s in float64 on each signal row's own span: an FFT spreads its rounding error,
+    ~1e-7 of the largest value in float32, over the whole row, and an echo of SNR 1e3 is 1e5
+    sigma_n high.
+    """
+    dt = band.dt_s
+    m = band.half_width
+    n_cols = x.shape[1]
+    taps = band.taps.astype(x.dtype)[None, :]
+    rows = np.flatnonzero((x > 0).any(axis=1))
+    if noise:
+        white = rng.standard_normal(x.shape, dtype=x.dtype)
+        white *= x.dtype.type(receiver.sigma_n_a / math.sqrt(2.0 * dt * receiver.bandwidth_hz))
+        if len(rows):
+            idx = np.flatnonzero(x[rows] > 0)
+            r, c = rows[idx // n_cols], idx % n_cols
+            shot_var = _shot_density_per_a(receiver) * x[r, c].astype(np.float64) / (2.0 * dt)
+            white[r, c] += np.sqrt(shot_var) * rng.standard_normal(len(idx))
+        y = signal.fftconvolve(white, taps, mode="valid", axes=1)
+    else:
+        white = None
+        y = np.zeros((x.shape[0], n_cols - 2 * m), dtype=x.dtype)
+    if len(rows):
+        nz = x[rows] > 0
+        first = np.argmax(nz, axis=1)
+        last = n_cols - 1 - np.argmax(nz[:, ::-1], axis=1)
+        span = int((last - first).max()) + 1
+        cols = np.minimum(first[:, None] + np.arange(span)[None, :], n_cols - 1)
+        block = np.where(cols <= last[:, None], x[rows[:, None], cols], 0.0).astype(np.float64)
+        conv = signal.fftconvolve(block, band.taps[None, :], mode="full", axes=1)
+        # full-convolution output o of a block starting at column a is y[a - 2m + o]
+        j = first[:, None] - 2 * m + np.arange(conv.shape[1])[None, :]
+        ok = (j >= 0) & (j < y.shape[1])
+        r = np.broadcast_to(rows[:, None], j.shape)
+        y[r[ok], j[ok]] += conv[ok].astype(y.dtype)
+    if white is not None:
+        x += white
+    return y
+
+
+def simulate_current_waveforms(
+    rng: np.random.Generator,
+    i_signal_a,
+    dt_s: float,
+    receiver: ReceiverModel,
+    *,
+    n_samples: int | None = None,
+    noise: bool = True,
+    dtype=np.float64,
+) -> np.ndarray:
+    """Band-limited noisy current of each waveform (PHYSICS.md section 5).
+
+    White current samples ``N(0, S(t) / (2 dt))`` (``S`` from :func:`noise_density_a2_hz`) are
+    added to the signal current BEFORE the band limit, then the sum is convolved with ``h_B``
+    (unit area, sigma_h = 1 / (4 sqrt(pi) B)). The noise is stationary from the first sample: it
+    is drawn over m = ceil(6 sigma_h / dt) extra samples either side, where the signal is 0.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+    i_signal_a : (n, L) float, or a callable ``f(t_s) -> (n, L)``
+        Signal current ``i_s = R_resp P_r(t)`` before the band limit [A] at ``t_s = j dt_s``,
+        j = 0..L-1 (zeros for noise only); a callable is evaluated on that grid.
+    dt_s : float
+        Time step [s]; PHYSICS.md asks ``dt <= min(tau / 10, 1 / (20 B))``.
+    receiver : ReceiverModel
+        Gain, excess noise, chain noise factor, bandwidth and the signal-free sigma_n.
+    n_samples : int, optional
+        L, required when ``i_signal_a`` is a callable.
+    noise : bool
+        False gives the noise-free band-limited signal through the same filter.
+    dtype : numpy float dtype
+        float32 halves memory and time (the gate simulation uses it).
+
+    Returns
+    -------
+    y_a : (n, L) dtype -- band-limited current at the discriminator, input-referred [A]
+    """
+    band = band_limit(dt_s, receiver.bandwidth_hz)
+    m = band.half_width
+    if callable(i_signal_a):
+        if n_samples is None:
+            raise ValueError("n_samples is required when i_signal_a is a callable")
+        i_signal_a = i_signal_a(dt_s * np.arange(n_samples))
+    sig = np.asarray(i_signal_a, dtype=np.float64)
+    if sig.ndim != 2:
+        raise ValueError(f"i_signal_a must be (n, L), got shape {sig.shape}")
+    n, length = sig.shape
+    x = np.zeros((n, length + 2 * m), dtype=dtype)
+    x[:, m : m + length] = sig
+    return noisy_band_limited(rng, x, receiver, band, noise)

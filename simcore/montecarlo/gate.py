@@ -1,0 +1,384 @@
+"""The whole gate of the whole array (PHYSICS.md section 5, step 3): every pixel's noisy current
+over the range gate, in chunks of bounded memory on worker threads, through the discriminator;
+stops sorted into detections and false alarms, timed with the quantisation of Eq. 26."""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy import constants as sc
+
+from ..detection import Outliers
+from ..pulse import PulseShape
+from ..receiver import ReceiverModel
+from .currents import BandLimit, band_limit, noisy_band_limited
+from .discriminator import batches, discriminate, pulse_fwhm_s, raw_end_s, reference_stop_s
+
+C = sc.c  # speed of light [m/s] (exact)
+_THREADS = max(1, min(2, os.cpu_count() or 1))
+_DEFAULT_MAX_BYTES = 64 << 20  # working set per worker thread [bytes]
+_BYTES_PER_SAMPLE = 36  # float32 input, output, FFT buffers and masks per sample of a chunk
+
+
+@dataclass(frozen=True)
+class McResult:
+    """One flash through the waveform Monte Carlo model.
+
+    pixel : (n,) int64 -- flat index of each echo pixel (as EchoStage.pixel)
+    detected : (n,) bool -- a stop fell in the pixel's detection window
+    range_m : (n,) float64 -- range of the first detection stop [m], NaN if none
+    n_stops : (n,) int64 -- all stops of the pixel's gate (detections and false alarms)
+    false_alarm_pixel : (f,) int64 -- flat pixel index of every false-alarm stop (all pixels)
+    false_alarm_range_m : (f,) float64 -- its range [m]
+    n_pixels_total : int -- pixels simulated (the whole array)
+    gate_s : (float, float) -- first and last sample time of the gate [s]
+    reference_stop_s : float -- t*_ref [s]
+    threshold_a : float -- V_T = TNR sigma_n [A]
+    dt_s : float
+    n_unfired : int -- stops at t_a because s(t) had no upward zero crossing in the window
+    timings_s : dict -- wall time of the run and thread-seconds per part [s]
+    """
+
+    pixel: np.ndarray
+    detected: np.ndarray
+    range_m: np.ndarray
+    n_stops: np.ndarray
+    false_alarm_pixel: np.ndarray
+    false_alarm_range_m: np.ndarray
+    n_pixels_total: int
+    gate_s: tuple[float, float]
+    reference_stop_s: float
+    threshold_a: float
+    dt_s: float
+    n_unfired: int
+    timings_s: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def outliers(self) -> Outliers:
+        """The false alarms as detection.Outliers (pixel, range), for the point cloud."""
+        return Outliers(self.false_alarm_pixel, self.false_alarm_range_m)
+
+    @property
+    def n_false_alarms(self) -> int:
+        return len(self.false_alarm_pixel)
+
+
+@dataclass(frozen=True)
+class _GateSetup:
+    shape: PulseShape
+    band: BandLimit
+    receiver: ReceiverModel
+    energy_j: float
+    t_lo: float  # time of gate sample 0 [s]
+    n_samples: int
+    threshold_a: float
+    t_d_s: float
+    cfd_fraction: float
+    holdoff_s: float
+    first_stop: bool
+    resolution_s: float
+    t_ref_s: float
+    raw_end_s: float
+    tau_s: float
+    noise: bool
+    continuous: bool
+    lit_of_pixel: np.ndarray  # (n_total,) index into the echo arrays, -1 if unlit
+    arrivals: np.ndarray  # (n_lit, K)
+    weights: np.ndarray  # (n_lit, K), per joule
+    window_lo: np.ndarray  # (n_lit,) detection window [s]
+    window_hi: np.ndarray
+
+
+def _signal_into(x: np.ndarray, setup: _GateSetup, lit: np.ndarray, local_rows: np.ndarray):
+    """Write i_s = R_resp E sum_k w_k P0(t - t_k) (Eqs. 7, 29, 30) of the lit rows into the
+    padded input x, on each pixel's own window (delays exact, never snapped)."""
+    any_weight = (setup.weights[lit] > 0).any(axis=1)
+    lit, local_rows = lit[any_weight], local_rows[any_weight]
+    if len(lit) == 0:
+        return
+    dt, m = setup.band.dt_s, setup.band.half_width
+    width = x.shape[1]
+    arr, w = setup.arrivals[lit], setup.weights[lit]
+    has = w > 0
+    t_first = np.where(has, arr, np.inf).min(axis=1)
+    t_last = np.where(has, arr, -np.inf).max(axis=1)
+    arr = np.where(has, arr, t_first[:, None])
+    scale = setup.receiver.responsivity_a_w * setup.energy_j
+    # padded column c holds the sample at t_lo + (c - m) dt
+    c0 = np.clip(np.floor((t_first - setup.t_lo) / dt).astype(np.int64) + m, 0, width)
+    t_end = t_last + setup.raw_end_s - setup.t_lo
+    c1 = np.clip(np.ceil(t_end / dt).astype(np.int64) + m + 1, 0, width)
+    n_cols = c1 - c0
+    k = arr.shape[1]
+    for sel in batches(np.maximum(n_cols, 1) * k, 1 << 21):
+        wmax = int(n_cols[sel].max())
+        if wmax <= 0:
+            continue
+        cols = c0[sel, None] + np.arange(wmax)[None, :]
+        t = setup.t_lo + (cols - m) * dt
+        p = np.einsum("pwk,pk->pw", setup.shape.raw_at(t[:, :, None] - arr[sel, None, :]), w[sel])
+        inside = cols < c1[sel, None]
+        r = np.broadcast_to(local_rows[sel, None], cols.shape)
+        x[r[inside], cols[inside]] = (scale * p[inside]).astype(x.dtype)
+
+
+def _gate_chunk(setup: _GateSetup, p0: int, p1: int, rng: np.random.Generator):
+    """Simulate pixels p0..p1-1 over the whole gate; return their stops and the part timings."""
+    t0 = time.perf_counter()
+    n = p1 - p0
+    m = setup.band.half_width
+    x = np.zeros((n, setup.n_samples + 2 * m), dtype=np.float32)
+    lit = setup.lit_of_pixel[p0:p1]
+    local = np.flatnonzero(lit >= 0)
+    _signal_into(x, setup, lit[local], local)
+    y = noisy_band_limited(rng, x, setup.receiver, setup.band, setup.noise)
+    t1 = time.perf_counter()
+    stops = discriminate(
+        y,
+        setup.band.dt_s,
+        setup.threshold_a,
+        setup.t_d_s,
+        setup.cfd_fraction,
+        holdoff_s=setup.holdoff_s,
+        first_stop=setup.first_stop,
+        t0_s=setup.t_lo,
+        x_padded_a=x if setup.continuous else None,
+        band=setup.band if setup.continuous else None,
+    )
+    del x, y
+    # Eq. 26: e1 per stop, e2 per pixel (each pixel's TDC registers the start once)
+    half = 0.5 * setup.resolution_s
+    e2 = rng.uniform(-half, half, size=n)
+    e1 = rng.uniform(-half, half, size=len(stops.row))
+    tof = (stops.t_s + e1) - (setup.t_ref_s + e2[stops.row])
+    pixel = stops.row + p0
+    lit_idx = setup.lit_of_pixel[pixel]
+    is_lit = lit_idx >= 0
+    in_window = np.zeros(len(pixel), dtype=bool)
+    li = lit_idx[is_lit]
+    t_lit = stops.t_s[is_lit]
+    in_window[is_lit] = (t_lit >= setup.window_lo[li]) & (t_lit <= setup.window_hi[li])
+    out = {
+        "pixel": pixel,
+        "lit": lit_idx,
+        "t_s": stops.t_s,
+        "range_m": 0.5 * C * tof,
+        "detection": is_lit & in_window,
+        "unfired": int(np.count_nonzero(~stops.fired)),
+    }
+    return out, (t1 - t0, time.perf_counter() - t1)
+
+
+def gate_samples(gate_center_m: float, gate_m: float, dt_s: float) -> tuple[float, int]:
+    """Time of the first gate sample [s] and the sample count of the range gate
+    [R_st - R_gate / 2, R_st + R_gate / 2] (clipped at 0)."""
+    lo = max(0.0, gate_center_m - 0.5 * gate_m)
+    hi = gate_center_m + 0.5 * gate_m
+    t_lo, t_hi = 2.0 * lo / C, 2.0 * hi / C
+    return t_lo, int(math.floor((t_hi - t_lo) / dt_s)) + 1
+
+
+def montecarlo_gate(
+    rng: np.random.Generator,
+    *,
+    pixel,
+    arrivals_s,
+    weights_per_j,
+    shape: PulseShape,
+    dt_s: float,
+    receiver: ReceiverModel,
+    pulse_energy_j: float,
+    n_pixels_total: int,
+    gate_center_m: float,
+    gate_m: float,
+    tnr: float,
+    t_d_s: float,
+    cfd_fraction: float,
+    resolution_s: float,
+    first_stop: bool = False,
+    holdoff_s: float | None = None,
+    noise: bool = True,
+    arming: str = "continuous",
+    max_bytes: int = _DEFAULT_MAX_BYTES,
+    n_threads: int = _THREADS,
+) -> McResult:
+    """Waveform Monte Carlo of one flash over the whole gate of every pixel (PHYSICS.md s. 5).
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator -- children are spawned from it, one per chunk of pixels
+    pixel : (n,) int -- flat index of each echo pixel, in [0, n_pixels_total)
+    arrivals_s, weights_per_j : (n, K) float -- Eq. 29-30 two-way delays [s] and weights (per
+        joule of pulse energy: P_r(t) = E sum_k w_k P0(t - t_k)); weight 0 = no element
+    shape : PulseShape -- the emitted pulse (Eq. 1)
+    dt_s : float -- time step [s]
+    receiver : ReceiverModel -- gain, noise, responsivity (Eqs. 7-18)
+    pulse_energy_j : float -- E [J]
+    n_pixels_total : int -- pixels of the array; the unlit ones see noise only
+    gate_center_m, gate_m : float -- range gate R_st and R_gate [m]
+    tnr : float -- V_T = tnr sigma_n
+    t_d_s, cfd_fraction : float -- CFD delay [s] and fraction (Eq. 19)
+    resolution_s : float -- timing resolution T_t [s] (Eq. 26)
+    first_stop : bool -- keep only each pixel's first stop
+    holdoff_s : float, optional -- re-arm hold-off; default one FWHM of the emitted pulse
+    noise : bool -- False: noise-free waveforms through the same discriminator
+    arming : "continuous" (an analog comparator) or "sampled" (crossings between samples only)
+    max_bytes : int -- working set per worker thread [bytes]
+    n_threads : int -- worker threads (numpy and scipy.fft release the GIL)
+
+    Returns
+    -------
+    McResult
+    """
+    if arming not in ("continuous", "sampled"):
+        raise ValueError(f"arming must be 'continuous' or 'sampled', got {arming!r}")
+    t_start = time.perf_counter()
+    pixel = np.asarray(pixel, dtype=np.int64).reshape(-1)
+    arrivals = np.atleast_2d(np.asarray(arrivals_s, dtype=np.float64))
+    weights = np.atleast_2d(np.asarray(weights_per_j, dtype=np.float64))
+    if arrivals.shape != weights.shape or arrivals.shape[0] != len(pixel):
+        raise ValueError(
+            f"arrivals_s {arrivals.shape} and weights_per_j {weights.shape} must be (n, K) "
+            f"with n = len(pixel) = {len(pixel)}"
+        )
+    if len(pixel) and (pixel.min() < 0 or pixel.max() >= n_pixels_total):
+        raise ValueError(f"pixel indices must lie in [0, {n_pixels_total})")
+    band = band_limit(dt_s, receiver.bandwidth_hz)
+    t_ref = reference_stop_s(shape, band, t_d_s, cfd_fraction)
+    t_lo, n_samples = gate_samples(gate_center_m, gate_m, dt_s)
+    lit_of_pixel = np.full(n_pixels_total, -1, dtype=np.int64)
+    lit_of_pixel[pixel] = np.arange(len(pixel))
+    has = weights > 0
+    tau = shape.tau_s
+    window_lo = np.where(has, arrivals, np.inf).min(axis=1, initial=np.inf) - tau
+    window_hi = np.where(has, arrivals, -np.inf).max(axis=1, initial=-np.inf) + 2.0 * tau
+    setup = _GateSetup(
+        shape=shape,
+        band=band,
+        receiver=receiver,
+        energy_j=float(pulse_energy_j),
+        t_lo=t_lo,
+        n_samples=n_samples,
+        threshold_a=float(tnr) * receiver.sigma_n_a,
+        t_d_s=float(t_d_s),
+        cfd_fraction=float(cfd_fraction),
+        holdoff_s=pulse_fwhm_s(shape) if holdoff_s is None else float(holdoff_s),
+        first_stop=first_stop,
+        resolution_s=float(resolution_s),
+        t_ref_s=t_ref,
+        raw_end_s=raw_end_s(shape),
+        tau_s=tau,
+        noise=noise,
+        continuous=arming == "continuous",
+        lit_of_pixel=lit_of_pixel,
+        arrivals=arrivals,
+        weights=weights,
+        window_lo=window_lo,
+        window_hi=window_hi,
+    )
+    rows = max(1, int(max_bytes) // (_BYTES_PER_SAMPLE * (n_samples + 2 * band.half_width)))
+    bounds = [(p, min(p + rows, n_pixels_total)) for p in range(0, n_pixels_total, rows)]
+    children = rng.spawn(len(bounds))
+    jobs = [(p0, p1, g) for (p0, p1), g in zip(bounds, children, strict=True)]
+    t_setup = time.perf_counter() - t_start
+
+    parts = []
+    t_wave = t_disc = 0.0
+    work: Callable[[Any], Any] = lambda job: _gate_chunk(setup, *job)  # noqa: E731
+    with ThreadPoolExecutor(max_workers=max(1, min(n_threads, len(jobs)))) as pool:
+        for out, (tw, td) in pool.map(work, jobs):
+            parts.append(out)
+            t_wave += tw
+            t_disc += td
+
+    t_collect = time.perf_counter()
+    cat = {k: np.concatenate([p[k] for p in parts]) for k in ("pixel", "lit", "t_s", "range_m")}
+    detection = np.concatenate([p["detection"] for p in parts])
+    n_lit = len(pixel)
+    lit = cat["lit"]
+    n_stops = np.bincount(lit[lit >= 0], minlength=n_lit).astype(np.int64)
+    det_lit, det_t, det_r = lit[detection], cat["t_s"][detection], cat["range_m"][detection]
+    order = np.lexsort((det_t, det_lit))
+    first_lit, first_at = np.unique(det_lit[order], return_index=True)
+    detected = np.zeros(n_lit, dtype=bool)
+    detected[first_lit] = True
+    range_m = np.full(n_lit, np.nan)
+    range_m[first_lit] = det_r[order][first_at]
+    fa = ~detection
+    timings = {
+        "setup": t_setup,
+        "waveforms_thread_s": t_wave,
+        "discriminator_thread_s": t_disc,
+        "collect": time.perf_counter() - t_collect,
+        "total": time.perf_counter() - t_start,
+    }
+    return McResult(
+        pixel=pixel,
+        detected=detected,
+        range_m=range_m,
+        n_stops=n_stops,
+        false_alarm_pixel=cat["pixel"][fa],
+        false_alarm_range_m=cat["range_m"][fa],
+        n_pixels_total=int(n_pixels_total),
+        gate_s=(t_lo, t_lo + (n_samples - 1) * dt_s),
+        reference_stop_s=t_ref,
+        threshold_a=setup.threshold_a,
+        dt_s=float(dt_s),
+        n_unfired=sum(p["unfired"] for p in parts),
+        timings_s=timings,
+    )
+
+
+def montecarlo_detection(
+    rng: np.random.Generator,
+    echo_stage,
+    receiver_model: ReceiverModel,
+    scene,
+    first_stop: bool = False,
+    **options,
+) -> McResult:
+    """The Monte Carlo detection stage for the pipeline: one flash of ``scene``.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+    echo_stage : pipeline.EchoStage -- uses pixel, arrivals_s, weights, shape, dt_s, cfd_delay_s
+    receiver_model : ReceiverModel
+    scene : Scene -- detector.pixels, laser.pulse_energy_j, timing (tnr, resolution_s,
+        cfd_fraction, range_gate_m) and gate_center_m
+    first_stop : bool -- keep only each pixel's first stop (default: multi-stop)
+    **options -- passed to :func:`montecarlo_gate` (holdoff_s, noise, arming, max_bytes,
+        n_threads)
+
+    Returns
+    -------
+    McResult -- per echo pixel (in echo_stage.pixel order): detected, range_m, n_stops; the
+    false alarms of every pixel of the array; timings.
+    """
+    t = scene.timing
+    return montecarlo_gate(
+        rng,
+        pixel=echo_stage.pixel,
+        arrivals_s=echo_stage.arrivals_s,
+        weights_per_j=echo_stage.weights,
+        shape=echo_stage.shape,
+        dt_s=echo_stage.dt_s,
+        receiver=receiver_model,
+        pulse_energy_j=scene.laser.pulse_energy_j,
+        n_pixels_total=scene.detector.pixels**2,
+        gate_center_m=scene.gate_center_m,
+        gate_m=t.range_gate_m,
+        tnr=t.tnr,
+        t_d_s=echo_stage.cfd_delay_s,
+        cfd_fraction=t.cfd_fraction,
+        resolution_s=t.resolution_s,
+        first_stop=first_stop,
+        **options,
+    )

@@ -1,0 +1,162 @@
+"""Receivers: what turns the echo stage's per-pixel echoes into detections, ranges and outliers.
+
+A receiver is one module behind one interface, selected by the scene key ``receiver.kind``:
+
+- it reads the echo stage's hand-off, :class:`simcore.echo.EchoStage` (per lit pixel: the
+  band-limited echo's peak per joule, half-maximum time and CFD slope, the strongest element's
+  material and facet, and the full waveform on demand: ``EchoStage.waveform_per_j(i)``);
+- :attr:`Receiver.respond` returns a :class:`Response` (per pixel: peak power at the input, the SNR
+  the app shows, and the receiver's scalar noise figures), the *receiver* stage;
+- :attr:`Receiver.detect` returns a :class:`Detection` (per pixel: detection probability, the
+  detected mask, noise-free and measured range, range sigma; the threshold and the false-alarm
+  points), the *detection* stage.
+
+Each declares the scene values its two steps read (the stages' cache keys). Adding a receiver is
+one module that builds a :class:`Receiver` and calls :func:`register` (built-in ones are named in
+``BUILT_IN`` and imported on first use): nothing else changes. ``lm_apd`` (the default) is the
+paper's linear-mode APD chain, Eqs. 7-28 (``simcore.receivers.lm_apd``).
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..detection import Outliers
+from ..stage import Stage, readonly
+
+if TYPE_CHECKING:
+    from ..echo import EchoStage
+    from ..scene import Scene
+
+# kind -> the module that registers it when imported
+BUILT_IN = {"lm_apd": "simcore.receivers.lm_apd"}
+DEFAULT_KIND = "lm_apd"
+_REGISTERED: dict[str, Receiver] = {}
+
+
+@dataclass(frozen=True, kw_only=True)
+class Response:
+    """A receiver's response to the echoes of one flash (the receiver stage's output).
+
+    peak_power_w : (n,) band-limited peak received power of each lit pixel [W] (point intensity)
+    snr : (n,) signal-to-noise ratio of each lit pixel [1] (points' SNR, the app's histogram and
+        the summary's median; inf where the receiver has no noise)
+    noise_figures : scalar diagnostics of the receiver, name (with unit) -> value
+    """
+
+    peak_power_w: np.ndarray
+    snr: np.ndarray
+    noise_figures: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Detection:
+    """Which lit pixels give a point and where, plus the false alarms (the detection stage's
+    output). Arrays are (n,), aligned with ``EchoStage.pixel``.
+
+    p_detect : probability of detecting the echo [1]
+    detected : bool, the echo was detected inside the range gate
+    range_true_m : noise-free measured range (Eq. 31, carries the waveform's bias) [m]
+    range_sigma_m : range noise standard deviation [m] (inf where undefined)
+    range_m : measured range, NaN where not detected [m]
+    threshold_w : the arming threshold as power at the receiver input [W] (waveform plots)
+    n_false_per_pixel : expected false alarms per pixel per flash [1]
+    outliers : the false-alarm points drawn for this flash
+    """
+
+    p_detect: np.ndarray
+    detected: np.ndarray
+    range_true_m: np.ndarray
+    range_sigma_m: np.ndarray
+    range_m: np.ndarray
+    threshold_w: float
+    n_false_per_pixel: float
+    outliers: Outliers
+
+
+@dataclass(frozen=True, kw_only=True)
+class Receiver:
+    """One receiver kind: its two steps and the scene values each reads.
+
+    kind : the ``receiver.kind`` value that selects it
+    doc : one line for the key reference
+    response_reads, detection_reads : scene -> hashable tuple of every scene value the step reads
+        (besides the echo stage's key and ``receiver.kind``)
+    respond : (scene, echo) -> Response
+    detect : (scene, echo, response) -> Detection
+    """
+
+    kind: str
+    doc: str
+    response_reads: Callable[[Scene], tuple]
+    respond: Callable[[Scene, EchoStage], Response]
+    detection_reads: Callable[[Scene], tuple]
+    detect: Callable[[Scene, EchoStage, Response], Detection]
+
+
+def register(receiver: Receiver) -> Receiver:
+    """Make ``receiver`` selectable as ``receiver.kind = receiver.kind``; returns it."""
+    known = _REGISTERED.get(receiver.kind)
+    if known is not None and known is not receiver:
+        raise ValueError(f"receiver kind {receiver.kind!r} is already registered")
+    _REGISTERED[receiver.kind] = receiver
+    return receiver
+
+
+def unregister(kind: str) -> None:
+    """Forget a registered receiver (a built-in one comes back on its next use)."""
+    _REGISTERED.pop(kind, None)
+
+
+def kinds() -> tuple[str, ...]:
+    """The valid values of ``receiver.kind``: the built-in receivers, then the registered ones."""
+    return (*BUILT_IN, *sorted(set(_REGISTERED) - set(BUILT_IN)))
+
+
+def get(kind: str) -> Receiver:
+    """The receiver registered as ``kind`` (importing a built-in one on first use)."""
+    if kind not in _REGISTERED and kind in BUILT_IN:
+        importlib.import_module(BUILT_IN[kind])  # registers itself
+    try:
+        return _REGISTERED[kind]
+    except KeyError:
+        raise ValueError(f"receiver.kind = {kind!r}: choose from {', '.join(kinds())}") from None
+
+
+# ----------------------------------------------------------------------------------------------
+# the receiver and detection stages: the scene's receiver, its two steps
+# ----------------------------------------------------------------------------------------------
+def _response_reads(scene: Scene) -> tuple:
+    return (scene.receiver.kind, get(scene.receiver.kind).response_reads(scene))
+
+
+def _detection_reads(scene: Scene) -> tuple:
+    return (scene.receiver.kind, get(scene.receiver.kind).detection_reads(scene))
+
+
+def stage_receiver(scene: Scene, echo: EchoStage) -> Response:
+    return _readonly_arrays(get(scene.receiver.kind).respond(scene, echo))
+
+
+def stage_detection(scene: Scene, echo: EchoStage, response: Response) -> Detection:
+    return _readonly_arrays(get(scene.receiver.kind).detect(scene, echo, response))
+
+
+def _readonly_arrays(record):
+    """``record`` with its array fields made read-only (stage outputs are cached and shared)."""
+    readonly(*(getattr(record, f.name) for f in fields(record)))
+    return record
+
+
+RECEIVER = Stage(name="receiver", upstream=("echo",), reads=_response_reads, compute=stage_receiver)
+DETECTION = Stage(
+    name="detection",
+    upstream=("echo", "receiver"),
+    reads=_detection_reads,
+    compute=stage_detection,
+)

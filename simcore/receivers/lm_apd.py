@@ -1,0 +1,194 @@
+"""The linear-mode APD receiver (Eqs. 7-28): the paper's chain, ``receiver.kind = "lm_apd"``.
+
+Response (Eqs. 7-18): the APD's gain and responsivity, the peak signal current of each echo, its
+SNR after the amplifier chain and the noise at the peak. Detection, in the statistical noise
+model (Section 4): the threshold V_T = TNR sigma_n, P_d (Eq. 27) drawn per pixel, the CFD and
+quantisation range sigma (Eqs. 24-26) drawn as range noise, Rice false alarms (Eq. 28) drawn as
+outliers; in the Monte Carlo model (Section 5) noisy waveforms through the discriminator decide
+detections, ranges and false alarms instead (P_d and sigma stay the statistical model's).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import detection, timing
+from .. import receiver as apd
+from ..echo import EchoStage
+from ..scene import Scene, SceneError
+from . import Detection, Receiver, Response, register
+
+MAX_OUTLIERS = 5_000_000  # false alarms drawn per flash at most (a TNR near 0 gives ~640/pixel)
+
+
+@dataclass(frozen=True, kw_only=True)
+class LmApdResponse(Response):
+    """The LM-APD's response; besides :class:`Response`, per lit pixel (n,):
+
+    model : the detector constants (gain, responsivity, fixed noise terms)
+    i_pk_a : peak signal current [A]
+    sigma_pk_a : noise at the peak, shot + dark + thermal through the chain (Eq. 27) [A rms]
+    ``snr`` is SNR_na of Eq. 18.
+    """
+
+    model: apd.ReceiverModel
+    i_pk_a: np.ndarray
+    sigma_pk_a: np.ndarray
+
+
+@dataclass(frozen=True, kw_only=True)
+class LmApdDetection(Detection):
+    """The LM-APD's detection; besides :class:`Detection`, ``threshold_a``: V_T = TNR sigma_n
+    [A] (``threshold_w`` is V_T over the responsivity)."""
+
+    threshold_a: float
+
+
+def respond(scene: Scene, echo: EchoStage) -> LmApdResponse:
+    """Eqs. 7-18 for every lit pixel's band-limited peak (the unfiltered one with the paper's
+    Eq. 14 form)."""
+    rx = apd.receiver_model(
+        scene.detector, scene.amplifiers, scene.laser.wavelength_m, paper_qe=scene.uses("qe_paper")
+    )
+    energy_j = scene.laser.pulse_energy_j
+    peak_w = echo.features.peak_w_per_j * energy_j
+    raw = scene.uses("unfiltered_peak")
+    snr_peak_w = echo.features.peak_raw_w_per_j * energy_j if raw else peak_w
+    i_pk_a = rx.responsivity_a_w * snr_peak_w
+    return LmApdResponse(
+        peak_power_w=peak_w,
+        snr=rx.snr(i_pk_a),
+        noise_figures={
+            "gain": rx.gain,
+            "responsivity_a_w": rx.responsivity_a_w,
+            "excess_noise": rx.excess_noise,
+            "chain_noise_factor": rx.chain_noise_factor,
+            "dark_noise_a": rx.dark_noise_a,
+            "thermal_noise_a": rx.thermal_noise_a,
+            "sigma_n_a": rx.sigma_n_a,
+        },
+        model=rx,
+        i_pk_a=i_pk_a,
+        sigma_pk_a=rx.sigma_peak_a(i_pk_a),
+    )
+
+
+def _response_reads(s: Scene) -> tuple:
+    return (
+        s.laser.pulse_energy_j,
+        s.laser.wavelength_m,
+        s.detector,
+        s.amplifiers,
+        (s.uses("qe_paper"), s.uses("unfiltered_peak")),
+    )
+
+
+def detect(scene: Scene, echo: EchoStage, rx: LmApdResponse) -> LmApdDetection:
+    """Section 4 (or 5 with ``fidelity.noise_model = "montecarlo"``): detections, ranges and
+    false alarms of one flash, seeded from the scene."""
+    t = scene.timing
+    rng = np.random.default_rng([scene.seed, 2024])
+    threshold_a = t.tnr * rx.model.sigma_n_a
+    p_d = detection_probability(scene, rx, threshold_a)
+    sigma_m = range_sigma_m(scene, echo, rx)
+    r_true_m = timing.range_from_half_max_m(echo.features.t_half_s, echo.shape.t_half_s)
+    n_false = false_alarms_per_pixel(scene)
+
+    n = len(echo.pixel)
+    if scene.fidelity.noise_model == "montecarlo":
+        # Section 5: noisy waveforms through the discriminator decide detections, ranges and
+        # false alarms; P_d and sigma above stay the statistical model's, for comparison
+        from .. import montecarlo  # noqa: PLC0415  (imported only when the MC model is asked for)
+
+        mc = montecarlo.montecarlo_detection(rng, echo, rx.model, scene)
+        drawn, r_meas_m, outliers = mc.detected, mc.range_m, mc.outliers
+    else:  # Section 4: Eq. 27 draws the detection, Eq. 24 the range noise, Eq. 28 the outliers
+        drawn = rng.random(n) < p_d
+        noise = rng.standard_normal(n)
+        with np.errstate(invalid="ignore"):
+            r_meas_m = r_true_m + np.where(drawn, sigma_m * noise, 0.0)
+        outliers = detection.draw_outliers(
+            rng, scene.detector.pixels**2, n_false, scene.gate_center_m, t.range_gate_m
+        )
+    lo = max(0.0, scene.gate_center_m - t.range_gate_m / 2.0)
+    hi = scene.gate_center_m + t.range_gate_m / 2.0
+    detected = drawn & np.isfinite(r_meas_m) & (r_meas_m >= lo) & (r_meas_m <= hi)
+    r_meas_m = np.where(detected, r_meas_m, np.nan)
+    return LmApdDetection(
+        p_detect=p_d,
+        detected=detected,
+        range_true_m=r_true_m,
+        range_sigma_m=sigma_m,
+        range_m=r_meas_m,
+        threshold_w=threshold_a / rx.model.responsivity_a_w,
+        n_false_per_pixel=n_false,
+        outliers=outliers,
+        threshold_a=threshold_a,
+    )
+
+
+def detection_probability(scene: Scene, rx: LmApdResponse, threshold_a: float) -> np.ndarray:
+    """(n,) Eq. 27, ours (the peak's own shot noise) or as printed (thermal only)."""
+    if scene.uses("eq27_paper"):
+        return detection.detection_probability_paper(rx.snr, scene.timing.tnr)
+    return detection.detection_probability(rx.i_pk_a, threshold_a, rx.sigma_pk_a)
+
+
+def range_sigma_m(scene: Scene, echo: EchoStage, rx: LmApdResponse) -> np.ndarray:
+    """(n,) Eq. 24: the CFD jitter (Eq. 25, ours or as printed) with the quantisation (Eq. 26)."""
+    t = scene.timing
+    if scene.uses("eq25_risetime"):
+        rise_s = timing.rise_time_10_90_s(echo.shape)
+        s_cfd_m = timing.sigma_cfd_paper_m(rx.snr, t.cfd_fraction, rise_s)
+    else:
+        s_cfd_m = timing.sigma_cfd_m(
+            rx.snr,
+            echo.features.cfd_slope_per_s,
+            t.cfd_fraction,
+            echo.cfd_delay_s,
+            echo.shape.sigma_h_s,
+        )
+    return timing.range_sigma_m(s_cfd_m, timing.sigma_quantisation_m(t.resolution_s))
+
+
+def false_alarms_per_pixel(scene: Scene) -> float:
+    """Eq. 28 (Rice, or as printed) over the gate; refused above MAX_OUTLIERS per flash."""
+    t, bandwidth_hz = scene.timing, scene.detector.bandwidth_hz
+    if scene.uses("eq28_paper"):
+        n_false = detection.false_alarms_per_pixel_paper(t.tnr, t.range_gate_m, bandwidth_hz)
+    else:
+        n_false = detection.false_alarms_per_pixel(t.tnr, t.range_gate_m, bandwidth_hz)
+    expected = n_false * scene.detector.pixels**2
+    if expected > MAX_OUTLIERS:
+        raise SceneError(
+            f"timing.tnr = {t.tnr:g} gives {expected:.3g} expected false alarms per flash over "
+            f"the {t.range_gate_m:g} m gate, more than the {MAX_OUTLIERS:,} this simulator draws; "
+            "raise the TNR or shorten timing.range_gate_m"
+        )
+    return n_false
+
+
+def _detection_reads(s: Scene) -> tuple:
+    return (
+        s.timing,
+        s.fidelity.noise_model,
+        s.seed,
+        s.gate_center_m,
+        s.detector.pixels,
+        s.detector.bandwidth_hz,
+        tuple(s.uses(f) for f in ("eq25_risetime", "eq27_paper", "eq28_paper")),
+    )
+
+
+RECEIVER = register(
+    Receiver(
+        kind="lm_apd",
+        doc="linear-mode APD and amplifier chain (Eqs. 7-28)",
+        response_reads=_response_reads,
+        respond=respond,
+        detection_reads=_detection_reads,
+        detect=detect,
+    )
+)

@@ -1,0 +1,169 @@
+"""What one flash gives: :class:`Result` (the point cloud, the per-pixel products of every stage,
+the stage timings), one pixel's echo as a :class:`Waveform`, and the JSON summary."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from . import geometry
+from .echo import EchoStage
+from .pointcloud import PointCloud
+from .receivers import Detection, Response
+from .scene import Scene
+from .target import TargetModel
+
+
+@dataclass(frozen=True, kw_only=True)
+class Waveform:
+    """One pixel's echo. Times since emission [s], powers at the receiver input [W]; empty arrays
+    and NaN times where the pixel receives no echo."""
+
+    row: int
+    col: int
+    t_s: np.ndarray  # (L,) sample times
+    power_w: np.ndarray  # (L,) unfiltered P_r(t)
+    filtered_w: np.ndarray  # (L,) band-limited y(t)
+    emitted_t_s: np.ndarray  # (M,) the emitted pulse, band-limited, scaled to this echo's peak
+    emitted_w: np.ndarray  # (M,)
+    t_half_s: float  # half-maximum time of y (NaN if no echo)
+    threshold_w: float  # the receiver's arming threshold expressed as input power
+    range_m: float  # measured range, NaN if not detected
+    range_true_m: float
+    p_detect: float
+    detected: bool
+
+
+@dataclass(kw_only=True)
+class Result:
+    """One flash: the point cloud, per-pixel products and the stage timings.
+
+    echo, receiver, detection : the outputs of those stages, per lit pixel (aligned with
+    ``echo.pixel``); hits, rays : the ray cast; timings_s : seconds per stage (0 = cached).
+    """
+
+    scene: Scene
+    cloud: PointCloud
+    echo: EchoStage
+    receiver: Response
+    detection: Detection
+    hits: geometry.Hits
+    rays: geometry.RayGrid
+    timings_s: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def points(self) -> np.ndarray:
+        return self.cloud.points
+
+    @property
+    def attributes(self) -> dict[str, np.ndarray]:
+        return self.cloud.attributes
+
+    @property
+    def target(self) -> TargetModel:
+        return self.echo.model
+
+    @property
+    def pixels(self) -> int:
+        return self.rays.pixels
+
+    def _image(self, values, fill) -> np.ndarray:
+        img = np.full(self.pixels**2, fill, dtype=np.float64)
+        img[self.echo.pixel] = values
+        return img.reshape(self.pixels, self.pixels)
+
+    @property
+    def range_image_m(self) -> np.ndarray:
+        """(pixels, pixels) measured range of each pixel's target point, NaN where none."""
+        return self._image(self.detection.range_m, np.nan)
+
+    @property
+    def peak_power_image_w(self) -> np.ndarray:
+        """(pixels, pixels) band-limited peak received power, 0 where no echo."""
+        return self._image(self.receiver.peak_power_w, 0.0)
+
+    @property
+    def visible_faces(self) -> np.ndarray:
+        return self.hits.visible_faces
+
+    def waveform(self, row: int, col: int) -> Waveform:
+        """The echo of pixel (row, col): raw and band-limited power, timing marks, threshold."""
+        n = self.pixels
+        if not (0 <= row < n and 0 <= col < n):
+            raise IndexError(f"pixel ({row}, {col}) is outside the {n} x {n} array")
+        e, d = self.echo, self.detection
+        i = np.searchsorted(e.pixel, row * n + col)
+        if i >= len(e.pixel) or e.pixel[i] != row * n + col:
+            return _no_echo(row, col, d.threshold_w)
+        energy_j = self.scene.laser.pulse_energy_j
+        t_s, raw, filt = e.waveform_per_j(i)
+        peak_w = self.receiver.peak_power_w[i]
+        t_ref_s = e.shape.t0_s + e.shape.step_s * np.arange(len(e.shape.filtered))
+        keep = (t_ref_s >= e.shape.t_start_s) & (t_ref_s <= e.shape.t_end_s)
+        return Waveform(
+            row=row,
+            col=col,
+            t_s=t_s,
+            power_w=raw * energy_j,
+            filtered_w=filt * energy_j,
+            emitted_t_s=t_ref_s[keep],
+            emitted_w=e.shape.filtered[keep] * (peak_w / e.shape.peak_w_per_j),
+            t_half_s=float(e.features.t_half_s[i]),
+            threshold_w=d.threshold_w,
+            range_m=float(d.range_m[i]),
+            range_true_m=float(d.range_true_m[i]),
+            p_detect=float(d.p_detect[i]),
+            detected=bool(d.detected[i]),
+        )
+
+    def summary(self) -> dict[str, Any]:
+        """The JSON summary of DESIGN.md section 3."""
+        d, r = self.detection, self.receiver
+        attrs = self.attributes
+        n_out = int(attrs["is_outlier"].sum())
+        n_hit = int(self.hits.hit_pixel_mask.sum())
+        n_target_points = len(self.cloud) - n_out
+        finite_sigma = d.range_sigma_m[d.detected]
+        return {
+            "n_pixels": self.pixels**2,
+            "n_hit_pixels": n_hit,
+            "n_lit_pixels": len(self.echo.pixel),
+            "n_points": len(self.cloud),
+            "n_target_points": n_target_points,
+            "n_outliers": n_out,
+            "n_dropped": n_hit - n_target_points,
+            "p_detect_mean": _stat(d.p_detect, np.mean),
+            "snr_median": _stat(r.snr, np.median),
+            "range_sigma_m_median": _stat(finite_sigma, np.median),
+            "n_false_expected": d.n_false_per_pixel * self.pixels**2,
+            "timings_s": dict(self.timings_s),
+            "target": {"name": self.target.name, "credit": self.target.credit},
+            "scene": self.scene.to_dict(),
+        }
+
+
+def _no_echo(row: int, col: int, threshold_w: float) -> Waveform:
+    empty = np.zeros(0)
+    return Waveform(
+        row=row,
+        col=col,
+        t_s=empty,
+        power_w=empty,
+        filtered_w=empty,
+        emitted_t_s=empty,
+        emitted_w=empty,
+        t_half_s=np.nan,
+        threshold_w=threshold_w,
+        range_m=np.nan,
+        range_true_m=np.nan,
+        p_detect=0.0,
+        detected=False,
+    )
+
+
+def _stat(values, fn) -> float | None:
+    v = np.asarray(values)
+    v = v[np.isfinite(v)]
+    return float(fn(v)) if len(v) else None

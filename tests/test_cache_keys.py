@@ -1,0 +1,183 @@
+"""The stage cache, key by key: for every scene key of the key reference, a warm pipeline run
+after changing only that key gives bit-identical arrays to a fresh pipeline on the changed scene.
+A stage that forgets a scene value it reads (its Stage.reads) serves its stale output and fails
+here; each change must also alter the result (else the case proves nothing), unless listed in
+INERT with the reason."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+from ideal_receiver import IDEAL, KIND
+
+import simcore
+from simcore import receivers
+from simcore.scene import PAPER_FORMS
+
+# two tilted plates, one 0.4 m behind the other, filling most of a 16 x 16 array (edges, a depth
+# step, range slopes), 4 sub-rays per pixel, SNRs near the TNR
+BASE = {
+    "pulse_energy_j": 4e-8,
+    "target.scale_m_per_unit": 1.0,
+    "target.materials": {"*": "lambertian"},
+    "pixels": 16,
+    "fidelity.subrays": 4,
+    "distance_m": 150.0,
+    "seed": 3,
+    "tnr": 3.0,
+    "timing.range_gate_m": 60.0,
+}
+REFINE = {"fidelity.refine_subrays": 16}  # for the keys that only act when refining
+# key -> (new value, extra base keys that make the key matter)
+ALTERNATIVES = {
+    "preset": ("interactive", {}),
+    "seed": (11, {}),
+    "conventions": ("paper", {}),
+    "laser.wavelength_m": (1550e-9, {}),
+    "laser.pulse_energy_j": (6e-8, {}),
+    "laser.pulse_width_s": (3e-9, {}),
+    "laser.divergence_rad": (1.5e-3, {}),
+    "transmit.beam_expansion_ratio": (0.1, {}),
+    "transmit.transmittance": (0.8, {}),
+    "transmit.illumination": ("gaussian", {}),
+    "receive.aperture_diameter_m": (0.3, {}),
+    "receive.transmittance": (0.8, {}),
+    "receive.fov_rad": (0.025, {}),
+    "detector.pixels": (12, {}),
+    "detector.pixel_pitch_m": (100e-6, {}),
+    "detector.gain_from": ("gain", {}),
+    "detector.responsivity_a_w": (15.0, {}),
+    "detector.gain": (60.0, {"detector.gain_from": "gain"}),
+    "detector.bias_voltage_v": (370.0, {"detector.gain_from": "bias"}),
+    "detector.breakdown_voltage_v": (410.0, {"detector.gain_from": "bias"}),
+    "detector.miller_exponent": (2.5, {"detector.gain_from": "bias"}),
+    "detector.quantum_efficiency": (0.6, {}),
+    "detector.excess_noise_k": (0.05, {}),
+    "detector.bandwidth_hz": (80e6, {}),
+    "detector.temperature_k": (350.0, {}),
+    "detector.load_ohm": (20.0, {}),
+    "detector.dark_surface_a": (1e-7, {}),
+    "detector.dark_bulk_a": (1e-9, {}),
+    "detector.snr_max": (5.0, {}),
+    "amplifiers.noise_factors": ((1.5, 1.3, 1.3), {}),
+    "amplifiers.power_gains": ((3.0, 100.0, 100.0), {}),
+    "timing.tnr": (4.0, {}),
+    "timing.resolution_s": (1e-9, {}),
+    "timing.cfd_fraction": (0.3, {}),
+    "timing.cfd_delay_s": (1e-9, {}),
+    "timing.range_gate_m": (40.0, {}),
+    "timing.gate_center_m": (160.0, {}),
+    "target.mesh": ("other", {}),  # a single plate
+    "target.scale_m_per_unit": (1.2, {}),
+    "target.material_map": ("map", {"target.materials": {}}),  # a map file
+    "target.materials": ({"*": "coating_1"}, {}),
+    "pose.pitch_deg": (10.0, {}),
+    "pose.azimuth_deg": (-15.0, {}),
+    "pose.roll_deg": (30.0, {}),
+    "pose.distance_m": (140.0, {}),
+    "pose.offset_x_m": (0.5, {}),
+    "pose.offset_y_m": (-0.5, {}),
+    "pose.quaternion_wxyz": ((0.98, 0.1, 0.15, 0.0), {}),
+    "fidelity.subrays": (9, {}),
+    "fidelity.time_step_s": (1e-10, {}),
+    "fidelity.refine_subrays": (16, {}),
+    "fidelity.refine_step_m": (0.5, REFINE),
+    "fidelity.merge_window": (0.25, {}),
+    "fidelity.probe_corners": (True, REFINE),
+    "fidelity.cell_spread": (True, {}),
+    "fidelity.noise_model": ("montecarlo", {}),
+    "receiver.kind": (KIND, {}),
+}
+# keys whose change leaves this scene's arrays as they were, and why
+INERT = {
+    "detector.pixel_pitch_m": "sets only the focal length, which no stage uses",
+}
+CASES = [*(("paper_forms", (form,)) for form in PAPER_FORMS), *ALTERNATIVES.items()]
+
+
+def test_every_key_of_the_reference_has_an_alternative_value():
+    keys = {row["key"] for row in simcore.key_reference()}
+    assert keys == set(ALTERNATIVES) | {"paper_forms"}
+
+
+def write_plates(path, plates) -> str:
+    """Square plates (size_m, z_offset_m, tilt_deg about y) facing the lidar, as one OBJ."""
+    meshes = []
+    for size_m, z_m, tilt_deg in plates:
+        box = trimesh.creation.box(extents=(size_m, size_m, 1e-3))
+        box.apply_transform(
+            trimesh.transformations.rotation_matrix(np.radians(tilt_deg), (0, 1, 0))
+        )
+        box.apply_translation((0, 0, z_m))
+        meshes.append(box)
+    trimesh.util.concatenate(meshes).export(path)
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("keys")
+    plate = write_plates(folder / "plate.obj", [(4.0, 0.0, 25.0), (1.5, -0.4, -10.0)])
+    other = write_plates(folder / "other.obj", [(3.0, 0.0, -20.0)])
+    material_map = folder / "map.toml"
+    material_map.write_text('default = "solar_panel"\n')
+    return {"plate": plate, "other": other, "map": str(material_map)}
+
+
+@pytest.fixture(scope="module")
+def ideal():
+    receivers.register(IDEAL)
+    yield
+    receivers.unregister(KIND)
+
+
+def arrays(result: simcore.Result) -> dict[str, np.ndarray]:
+    """Every per-pixel and per-point product, and the echoes of a few pixels."""
+    d, r, e = result.detection, result.receiver, result.echo
+    out = {"points": result.points, "echo.pixel": e.pixel, "echo.weights": e.weights}
+    out |= {f"attr.{k}": v for k, v in result.attributes.items()}
+    for name in ("p_detect", "detected", "range_true_m", "range_sigma_m", "range_m"):
+        out[f"detection.{name}"] = getattr(d, name)
+    out["detection.threshold_w"] = np.array([d.threshold_w, d.n_false_per_pixel])
+    out["receiver.peak_power_w"], out["receiver.snr"] = r.peak_power_w, r.snr
+    out["echo.t_half_s"] = e.features.t_half_s
+    out["echo.slope"] = e.features.cfd_slope_per_s
+    n = result.pixels
+    for row, col in ((n // 2, n // 2), (n // 2, n // 4), (n // 3, n // 2 + 1)):
+        w = result.waveform(row, col)
+        for name in ("t_s", "power_w", "filtered_w", "emitted_w"):
+            out[f"waveform{row},{col}.{name}"] = getattr(w, name)
+        marks = (w.t_half_s, w.threshold_w, w.range_m, w.range_true_m, w.p_detect, w.detected)
+        out[f"waveform{row},{col}.marks"] = np.array(marks, dtype=np.float64)
+    return out
+
+
+def assert_bit_identical(got: dict, expected: dict) -> None:
+    assert got.keys() == expected.keys()
+    for name in expected:
+        a, b = np.asarray(got[name]), np.asarray(expected[name])
+        assert a.dtype == b.dtype and a.shape == b.shape, name
+        assert a.tobytes() == b.tobytes(), f"{name} differs from a fresh pipeline's"
+
+
+def differs(a: dict, b: dict) -> bool:
+    return a.keys() != b.keys() or any(
+        np.asarray(a[k]).shape != np.asarray(b[k]).shape
+        or np.asarray(a[k]).tobytes() != np.asarray(b[k]).tobytes()
+        for k in a
+    )
+
+
+@pytest.mark.parametrize(("key", "alternative"), CASES, ids=[c[0] for c in CASES])
+def test_a_warm_run_after_changing_one_key_equals_a_fresh_run(key, alternative, files, ideal):
+    value, extra = alternative if key != "paper_forms" else (alternative, {})
+    value = files.get(value, value) if isinstance(value, str) else value
+    base = simcore.with_overrides(simcore.Scene(), {**BASE, "target.mesh": files["plate"], **extra})
+    changed = simcore.with_overrides(base, {key: value})
+    assert changed != base
+    warm = simcore.Pipeline()
+    before = arrays(warm.run(base))
+    after = warm.run(changed)
+    assert_bit_identical(arrays(after), arrays(simcore.Pipeline().run(changed)))
+    assert differs(arrays(after), before) != (key in INERT), "the change must show (or be INERT)"

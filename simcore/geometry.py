@@ -28,7 +28,7 @@ from .illumination import illumination_gain
 from .pulse import scene_pulse_shape
 from .scene import Pose, Scene
 from .stage import Stage, readonly
-from .target import TargetModel, load_target
+from .target import TargetModel, load_target, source_stamp
 
 C = 299_792_458.0  # speed of light [m/s] (exact)
 
@@ -655,7 +655,12 @@ def _hits_reads(s: Scene) -> tuple:
 TARGET = Stage(
     name="target",
     upstream=(),
-    reads=lambda s: (s.target.mesh, s.target.scale_m_per_unit, s.target.material_map),
+    reads=lambda s: (
+        s.target.mesh,
+        s.target.scale_m_per_unit,
+        s.target.material_map,
+        source_stamp(s.target),  # a file overwritten in place is read again
+    ),
     compute=stage_target,
 )
 RAYS = Stage(

@@ -239,6 +239,27 @@ def _read_geometry(path: Path) -> MeshGeometry:
     return MeshGeometry(vertices, faces.astype(np.int64), face_part, tuple(names))
 
 
+def source_stamp(target: Target) -> tuple:
+    """What identifies the files behind ``target`` now: each file's path, size and modification
+    time (None for a file that cannot be found; loading it then says why). A cache keyed by
+    this sees a mesh or material map overwritten in place."""
+    try:
+        path, _, folder = _resolve(target)
+    except TargetError:
+        path, folder = None, None
+    files = [path, Path(target.material_map) if target.material_map else None]
+    if folder is not None:
+        files.append(folder / "target.toml")
+    stamp = []
+    for f in files:
+        try:
+            st = f.stat() if f is not None else None
+        except OSError:
+            st = None
+        stamp.append((str(f), st.st_size, st.st_mtime_ns) if st is not None else None)
+    return tuple(stamp)
+
+
 def _read_parts(path: Path) -> list[tuple[str, trimesh.Trimesh]]:
     """Read a mesh file as (part name, mesh) pairs with scene transforms applied."""
     try:

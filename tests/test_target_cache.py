@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 from conftest import write_plates
@@ -104,3 +106,19 @@ def test_the_cache_keeps_a_bounded_number_of_entries(tmp_path, cache, monkeypatc
     for i in range(5):
         _load(write_plates(tmp_path / f"plate{i}.obj", [(1.0 + i, 0.0, 0.0)]))
     assert len(_entries(cache)) == 3
+
+
+def test_a_warm_pipeline_reads_a_mesh_overwritten_in_place(tmp_path, cache):
+    mesh = tmp_path / "plate.obj"
+    write_plates(mesh, [(2.0, 0.0, 0.0)])
+    scene = simcore.with_overrides(
+        simcore.Scene(),
+        {"target.mesh": str(mesh), "target.scale_m_per_unit": 1.0, "pixels": 32},
+    )
+    pipeline = simcore.Pipeline()
+    small = pipeline.run(scene).summary()["n_hit_pixels"]
+    write_plates(mesh, [(4.0, 0.0, 0.0)])  # same path, another mesh
+    os.utime(mesh, ns=(1, 1))  # whatever the clock's resolution, the file's stamp changes
+    warm = pipeline.run(scene).summary()["n_hit_pixels"]
+    fresh = simcore.Pipeline().run(scene).summary()["n_hit_pixels"]
+    assert warm == fresh > small

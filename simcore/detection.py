@@ -1,4 +1,7 @@
-"""Detection probability and false alarms (Eqs. 27-28), and drawing them for one flash."""
+"""Detection probability and false alarms (Eqs. 27-28), and drawing them for one flash.
+
+The model: docs/physics.md#eq-27, docs/physics.md#eq-28, docs/physics.md#statistical-model.
+"""
 
 from __future__ import annotations
 

@@ -3,6 +3,8 @@
 Sensor frame: origin at the lidar, z = boresight, x = image right (columns), y = image down (rows);
 right-handed. Pixel (row i, col j) of an n x n array looks along the pinhole direction
 ``normalize((x/f_r, y/f_r, 1))`` of its centre.
+
+The model: docs/physics.md#geometry (pose, pixel grid, first hits, refinement of mixed pixels).
 """
 
 from __future__ import annotations

@@ -1,4 +1,7 @@
-"""The transmitted beam: irradiance per transmitted watt across the illuminated spot (Eqs. 4, 5)."""
+"""The transmitted beam: irradiance per transmitted watt across the illuminated spot (Eqs. 4, 5).
+
+The model: docs/physics.md#illumination.
+"""
 
 from __future__ import annotations
 

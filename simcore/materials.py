@@ -3,6 +3,9 @@
 The library is the paper's Table 1 ("Windsurfing" there is a mistranslation of solar panel)
 plus a true Lambertian. Which target part gets which material is data: a material map TOML
 next to each target.
+
+The model: docs/physics.md#target-model (Eq. 6: docs/physics.md#eq-6; Table 1:
+docs/physics.md#table-1).
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 Keplerian elements -> ECI states (two-body, optionally with the secular J2 drift), the target's
 three-axis stabilised LVLH attitude, the lidar's tracking attitude and, from the two, the pose of
-the target body in the lidar sensor frame over a fly-around (PHYSICS.md section 3, Table 3).
+the target body in the lidar sensor frame over a fly-around (docs/physics.md#table-3).
 
 Frames
 ------

@@ -1,4 +1,7 @@
-"""Point cloud assembly: measured ranges along each pixel's line of sight, plus outliers."""
+"""Point cloud assembly: measured ranges along each pixel's line of sight, plus outliers.
+
+The model: docs/physics.md#point-cloud.
+"""
 
 from __future__ import annotations
 

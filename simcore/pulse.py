@@ -4,6 +4,8 @@ The band-limited pulse p_B = h_B * P0 (Gaussian impulse response of the detector
 convolved with the Q-switched pulse of Eq. 1) has a closed form, an exponentially modified Gaussian.
 It is tabulated once per pulse at a few picoseconds and interpolated, so every echo
 y(t) = sum_k w_k p_B(t - t_k) is evaluated at exact delays, never snapped to the time grid.
+
+The model: docs/physics.md#pulse, docs/physics.md#band-limit, docs/physics.md#emg.
 """
 
 from __future__ import annotations

@@ -2,6 +2,8 @@
 
 All currents in amperes, powers in watts, bandwidths in hertz. Noise figures are rms currents
 referred to the APD output (input of the amplifier chain).
+
+The model: docs/physics.md#receiver (Eqs. 7-18: docs/physics.md#eq-7 ... docs/physics.md#eq-18).
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ its valid range and a one-line doc in its metadata, so validation, error message
 key reference all come from this one place (``lmapd keys`` prints the table).
 
 The defaults are the paper's Table 4 ("paper" scene) plus documented choices for what the paper
-leaves out (PHYSICS.md section 3).
+leaves out (docs/physics.md#table-4).
 """
 
 from __future__ import annotations
@@ -285,7 +285,7 @@ class Scene:
     conventions: str = _f(
         "ours",
         "-",
-        doc="ours (PHYSICS.md, default) or paper (all the paper's literal forms)",
+        doc="ours (docs/physics.md#corrections, default) or paper (all the paper's literal forms)",
         choices=("ours", "paper"),
     )
     paper_forms: tuple[str, ...] = _f(

@@ -1,5 +1,9 @@
 """Timing: half-maximum ranging, the constant-fraction discriminator and range errors
 (Eqs. 19, 24-26, 31).
+
+The model: docs/physics.md#detection (docs/physics.md#eq-19, docs/physics.md#eq-24,
+docs/physics.md#eq-25, docs/physics.md#eq-26, docs/physics.md#eq-31).
+
 """
 
 from __future__ import annotations
@@ -55,7 +59,7 @@ def sigma_cfd_paper_m(snr, cfd_fraction: float, rise_time_s: float):
 def rise_time_10_90_s(shape: PulseShape) -> float:
     """10-90 % rise time of the band-limited pulse, the signal the discriminator sees: the tau_r
     of the paper's Eq. 25 (2.76 ns for 5 ns at 120 MHz; with it the paper's form is 2.4x ours
-    even with c/2, as PHYSICS.md states)."""
+    even with c/2, docs/physics.md#eq-25)."""
     return shape.rise_time_10_90_s
 
 

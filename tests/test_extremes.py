@@ -1,4 +1,4 @@
-"""Stability at the edges of the parameter space (PHYSICS.md section 6): no NaN or inf ever reaches
+"""Stability at the edges of the parameter space (docs/physics.md#numerical-care): no NaN or inf ever reaches
 an output; what is invalid is refused with a clear message."""
 
 import numpy as np

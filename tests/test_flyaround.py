@@ -1,4 +1,4 @@
-"""The fly-around (PHYSICS.md section 3): frames follow the orbits, outputs and CLI contract.
+"""The fly-around (docs/physics.md#flyaround): frames follow the orbits, outputs and CLI contract.
 
 A short fly-around (3 frames, 32 x 32 pixels, 1 sub-ray) keeps the file fast; the frames are far
 apart in time (1500 s, a quarter orbit) so that distance and attitude differ between them.

@@ -1,4 +1,4 @@
-"""The waveform Monte Carlo model (PHYSICS.md section 5) against the statistical model.
+"""The waveform Monte Carlo model (docs/physics.md#monte-carlo) against the statistical model.
 
 Every tolerance is derived from the number of trials (binomial for P_d, Poisson for counts, the
 sampling spread of a standard deviation or of a median absolute deviation) plus, where PHYSICS.md

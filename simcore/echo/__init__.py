@@ -7,6 +7,7 @@ with the energy, so a pulse-energy change never re-runs this stage.
 ``stage``     the echo stage: what it hands a receiver (:class:`EchoStage`), its declaration
 
 The pulse itself (Eq. 1, the band limit) is ``simcore.pulse``; its names are re-exported here.
+The model: docs/physics.md#echo (docs/physics.md#eq-29, docs/physics.md#eq-30).
 """
 
 from ..pulse import (

@@ -1,5 +1,5 @@
-"""The waveform Monte Carlo model (PHYSICS.md section 5): noisy currents through the band limit and
-the constant-fraction discriminator itself, over the whole range gate of every pixel.
+"""The waveform Monte Carlo model (docs/physics.md#monte-carlo): noisy currents through the band
+limit and the constant-fraction discriminator itself, over the whole range gate of every pixel.
 
 It checks the statistical model (Eqs. 24-28) by simulating what it summarises:
 

@@ -1,4 +1,4 @@
-"""Noisy currents through the band limit (PHYSICS.md section 5, step 1): the white current
+"""Noisy currents through the band limit (docs/physics.md#mc-noise): the white current
 samples of the one-sided noise density, the signal current, the Gaussian h_B convolution."""
 
 from __future__ import annotations
@@ -136,7 +136,7 @@ def simulate_current_waveforms(
     noise: bool = True,
     dtype=np.float64,
 ) -> np.ndarray:
-    """Band-limited noisy current of each waveform (PHYSICS.md section 5).
+    """Band-limited noisy current of each waveform (docs/physics.md#mc-noise).
 
     White current samples ``N(0, S(t) / (2 dt))`` (``S`` from :func:`noise_density_a2_hz`) are
     added to the signal current BEFORE the band limit, then the sum is convolved with ``h_B``
@@ -150,7 +150,7 @@ def simulate_current_waveforms(
         Signal current ``i_s = R_resp P_r(t)`` before the band limit [A] at ``t_s = j dt_s``,
         j = 0..L-1 (zeros for noise only); a callable is evaluated on that grid.
     dt_s : float
-        Time step [s]; PHYSICS.md asks ``dt <= min(tau / 10, 1 / (20 B))``.
+        Time step [s]; docs/physics.md#time-step asks ``dt <= min(tau / 10, 1 / (20 B))``.
     receiver : ReceiverModel
         Gain, excess noise, chain noise factor, bandwidth and the signal-free sigma_n.
     n_samples : int, optional

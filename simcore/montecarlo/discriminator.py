@@ -1,4 +1,4 @@
-"""The discriminator (Eq. 19; PHYSICS.md section 5, step 2): continuous-time arming on V_T, the
+"""The discriminator (Eq. 19; docs/physics.md#mc-discriminator): continuous-time arming on V_T, the
 constant-fraction stop, the re-arm hold-off, and the reference pulse's own stop."""
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
-"""The whole gate of the whole array (PHYSICS.md section 5, step 3): every pixel's noisy current
-over the range gate, in chunks of bounded memory on worker threads, through the discriminator;
+"""The whole gate of the whole array (docs/physics.md#mc-time-of-flight): every pixel's noisy
+current over the range gate, in chunks of bounded memory on worker threads, through the discriminator;
 stops sorted into detections and false alarms, timed with the quantisation of Eq. 26."""
 
 from __future__ import annotations
@@ -209,7 +209,8 @@ def montecarlo_gate(
     max_bytes: int = _DEFAULT_MAX_BYTES,
     n_threads: int = _THREADS,
 ) -> McResult:
-    """Waveform Monte Carlo of one flash over the whole gate of every pixel (PHYSICS.md s. 5).
+    """Waveform Monte Carlo of one flash over the whole gate of every pixel
+    (docs/physics.md#monte-carlo).
 
     Parameters
     ----------

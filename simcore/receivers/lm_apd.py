@@ -6,6 +6,8 @@ model (Section 4): the threshold V_T = TNR sigma_n, P_d (Eq. 27) drawn per pixel
 quantisation range sigma (Eqs. 24-26) drawn as range noise, Rice false alarms (Eq. 28) drawn as
 outliers; in the Monte Carlo model (Section 5) noisy waveforms through the discriminator decide
 detections, ranges and false alarms instead (P_d and sigma stay the statistical model's).
+
+The model: docs/physics.md#receiver, docs/physics.md#detection, docs/physics.md#monte-carlo.
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""Statistical model (Eqs. 24-28, ours) against the waveform Monte Carlo (docs/physics.md#monte-carlo).
+"""Statistical model (Eqs. 24-28, ours) against the waveform Monte Carlo
+(docs/physics.md#monte-carlo).
 
 Writes docs/img/mc_agreement.png with three panels -- P_d vs TNR for several SNR (Eq. 27 curves,
 MC points with binomial error bars), false alarms per pixel per 1 km gate vs TNR (Rice, the

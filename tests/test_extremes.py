@@ -1,5 +1,5 @@
-"""Stability at the edges of the parameter space (docs/physics.md#numerical-care): no NaN or inf ever reaches
-an output; what is invalid is refused with a clear message."""
+"""Stability at the edges of the parameter space (docs/physics.md#numerical-care): no NaN or inf
+ever reaches an output; what is invalid is refused with a clear message."""
 
 import numpy as np
 import pytest

@@ -4,7 +4,8 @@ clients at once both see correct results (app.soak does the work; scripts/soak_a
 
 The work is bounded (300 changes, then two client changes), not the wall time: this shared 2-core
 machine drifts by 2x between spells, so the elapsed time is reported (soak.txt, and in the test's
-output with ``-s``), never asserted. A hang still fails: every wait in the soak has its own limit."""
+output with ``-s``), never asserted. A hang still fails: every wait in the soak has its own
+limit."""
 
 from __future__ import annotations
 

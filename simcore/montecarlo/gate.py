@@ -1,6 +1,7 @@
 """The whole gate of the whole array (docs/physics.md#mc-time-of-flight): every pixel's noisy
 current over the range gate, in chunks of bounded memory on worker threads, through the
-discriminator; stops sorted into detections and false alarms, timed with the quantisation of Eq. 26."""
+discriminator; stops sorted into detections and false alarms, timed with the quantisation of
+Eq. 26."""
 
 from __future__ import annotations
 

@@ -14,6 +14,7 @@ import sys
 import threading
 import time
 from pathlib import Path
+from urllib.parse import urlsplit
 
 import msgpack
 import numpy as np
@@ -80,12 +81,13 @@ def test_main_listens_on_loopback_unless_a_host_is_given(monkeypatch):
 def test_the_start_message_names_the_address_and_warns_off_loopback():
     from app.main import start_message
 
-    assert start_message("127.0.0.1", 8080) == [
-        "lmapd-sim app: http://127.0.0.1:8080/  (Ctrl+C stops it)"
+    assert start_message("127.0.0.1", 8080, "T0k-en_") == [
+        "lmapd-sim app: http://127.0.0.1:8080/?token=T0k-en_  (Ctrl+C stops it)"
     ]
-    lines = start_message("0.0.0.0", 9000)
-    assert lines[0].startswith("lmapd-sim app: http://0.0.0.0:9000/")
+    lines = start_message("0.0.0.0", 9000, "abc")
+    assert lines[0].startswith("lmapd-sim app: http://0.0.0.0:9000/?token=abc ")
     assert "warning: listening on 0.0.0.0, not only on this machine" in lines[1]
+    assert start_message("::1", 8080, "abc")[0].startswith("lmapd-sim app: http://[::1]:8080/?")
 
 
 def _listening_addresses(port: int) -> set[str]:
@@ -104,8 +106,8 @@ def _listening_addresses(port: int) -> set[str]:
 def test_the_server_binds_127_0_0_1_only_and_says_so_at_start(tmp_path):
     log_path = tmp_path / "server.log"
     with app_server(log_path=log_path) as url:
-        port = int(url.rsplit(":", 1)[1].strip("/"))
-        announced = f"lmapd-sim app: http://127.0.0.1:{port}/"
+        port = urlsplit(url).port
+        announced = f"lmapd-sim app: http://127.0.0.1:{port}/?token="
         deadline = time.monotonic() + 10
         while announced not in log_path.read_text() and time.monotonic() < deadline:
             time.sleep(0.1)
@@ -267,7 +269,7 @@ DEGENERATE = [
         + np.array([[0, 0, 1, 0, 0, 0, np.nan, 0, 0, 0, 1, 0]], np.float32).tobytes()
         + b"\0\0",
         "nan.stl",
-        "no triangles",  # trimesh drops NaN triangles; none is left
+        "the mesh has NaN or infinite vertex coordinates",  # not a triangle silently dropped
     ),
     (b"glTF\x02\x00\x00\x00" + b"\xff" * 40, "x.glb", "cannot read the .glb file"),
     (b"solid x\nfacet garbage\n", "x.stl", ""),
@@ -398,17 +400,15 @@ def test_the_fly_around_controls_survive_garbage_too(app, key):
 def test_websocket_messages_over_the_cap_are_refused_before_allocation():
     from wslink import chunking
 
-    from app.limits import MAX_MESSAGE_BYTES, cap_websocket_messages
+    from app.security import MAX_MESSAGE_BYTES, BoundedUnChunker, Limits, PendingBudget, Refused
 
-    cap_websocket_messages()
-    cap_websocket_messages()  # idempotent
-    unchunker = chunking.UnChunker()
+    limits = Limits()
+    unchunker = BoundedUnChunker(limits, PendingBudget(limits.total_budget_bytes))
     unchunker.set_max_message_size(4 * 1024**3)  # what wslink grants an authenticated client
-    assert unchunker.max_message_size == MAX_MESSAGE_BYTES
+    assert limits.message_bytes == MAX_MESSAGE_BYTES
     header = chunking._encode_header(7, 0, 2 * 1024**3)  # "a 2 GB message follows"
-    with pytest.raises(ValueError, match="exceeds the allocation limit"):
+    with pytest.raises(Refused, match="the limit is"):
         unchunker.process_chunk(header + b"x")
-    small = chunking.UnChunker()
-    small.set_max_message_size(4 * 1024**3)
+    assert not unchunker.pending and unchunker.budget.reserved_bytes == 0
     message = next(chunking.generate_chunks(msgpack.packb({"a": 1}), 0))
-    assert small.process_chunk(message) == {"a": 1}
+    assert unchunker.process_chunk(message) == {"a": 1}

@@ -21,9 +21,10 @@ and ``clear_state_client_cache`` of trame's protocol instance, see ``attach``):
 * each page has its own record of what it was sent; a value reaches a page only if it differs
   from that record, and only once the change callbacks have run (a value the controls' validators
   correct is never forwarded raw, and an upload's bytes never leave the server);
-* a page that sends, for a key, exactly the value the server last pushed to it, with no send of
-  that key in between, is echoing the push over its own unsent change (see above): that write is
-  dropped, so the last genuine write wins and every page ends showing it.
+* a page that sends, for a key, a value the server pushed to it since it last sent that key is
+  echoing a push that overwrote its own unsent change (see above): that write is dropped and the
+  page is sent the current value, so the last genuine write wins and every page ends showing it
+  (a page that really chose such a value again sees it replaced by the current one).
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ from app.state import echo
 log = logging.getLogger(__name__)
 
 STATE_TOPIC = "trame.state.topic"
+MAX_REMEMBERED = 16  # values pushed to a page per key, remembered to recognise its echoes
 
 
 class ClientStateSync:
@@ -51,7 +53,8 @@ class ClientStateSync:
         self.protocol = None
         self.clients: Callable[[], list[str]] = list  # set by app.security.Guard
         self._sent: dict[str, dict[str, bytes]] = {}  # page -> key -> packed value it holds
-        self._pushed: dict[str, set[str]] = {}  # page -> client keys pushed since it sent them
+        # page -> client key -> values pushed to it since it last sent that key (the newest few)
+        self._pushed: dict[str, dict[str, list[bytes]]] = {}
         self._held: set[str] = set()  # keys of a client update being applied
         self.n_dropped = 0
         self.n_echoes = 0
@@ -82,34 +85,39 @@ class ClientStateSync:
             update = {k: values[k] for k in keys if sent.get(k) != packed[k]}
             if not update:
                 continue
-            pushed = self._pushed.setdefault(client_id, set())
+            pushed = self._pushed.setdefault(client_id, {})
             for key in update:
                 sent[key] = packed[key]
                 if key in self.screens:
-                    pushed.add(key)
+                    remembered = pushed.setdefault(key, [])
+                    remembered.append(packed[key])
+                    del remembered[:-MAX_REMEMBERED]
             self.protocol.publish(STATE_TOPIC, update, client_id=client_id)
 
     # -- page -> server ----------------------------------------------------------------------------
     def apply_client_changes(self, client_id: str, changes: list[tuple[str, Any]]) -> dict:
         """Store the accepted ``(key, value)`` changes of one page, run the change callbacks, then
         send the resulting values to the pages that do not hold them. Returns what was accepted."""
-        accepted = self._accept(client_id, changes)
-        if not accepted:
-            return accepted
+        accepted, echoes = self._accept(client_id, changes)
         held = set(accepted) - self._held
         self._held |= held
         try:
-            with self.state:
-                self.state.update(accepted)
+            if accepted:
+                with self.state:
+                    self.state.update(accepted)
         finally:
             self._held -= held
-        self.push_state_change({key: self.state[key] for key in accepted})
+        resync = [*accepted, *echoes]
+        if resync:
+            self.push_state_change({key: self.state[key] for key in resync})
         return accepted
 
-    def _accept(self, client_id: str, changes: list[tuple[str, Any]]) -> dict:
+    def _accept(self, client_id: str, changes: list[tuple[str, Any]]) -> tuple[dict, list[str]]:
+        """The changes to store, and the keys of the page's echoes (it holds those values)."""
         sent = self._sent.setdefault(client_id, {})
-        pushed = self._pushed.setdefault(client_id, set())
+        pushed = self._pushed.setdefault(client_id, {})
         accepted: dict[str, Any] = {}
+        echoes: list[str] = []
         for key, raw in changes:
             screen = self.screens.get(key)
             try:
@@ -121,10 +129,11 @@ class ClientStateSync:
                 self.n_dropped += 1
                 log.warning("dropped state %s from a client: %s", echo(key), str(exc)[:200])
                 continue
-            if key in pushed and sent.get(key) == packed:
+            sent[key] = packed  # what the page holds now
+            if packed in pushed.get(key, ()):
                 self.n_echoes += 1  # the page sent back what we pushed over its unsent change
+                echoes.append(key)
                 continue
-            pushed.discard(key)
-            sent[key] = packed
+            pushed.pop(key, None)
             accepted[key] = value
-        return accepted
+        return accepted, echoes

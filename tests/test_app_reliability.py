@@ -412,3 +412,95 @@ def test_websocket_messages_over_the_cap_are_refused_before_allocation():
     assert not unchunker.pending and unchunker.budget.reserved_bytes == 0
     message = next(chunking.generate_chunks(msgpack.packb({"a": 1}), 0))
     assert unchunker.process_chunk(message) == {"a": 1}
+
+
+# -- issue 20: NaN meshes in every format, upload files, partial-message budgets ------------------
+def _nan_mesh() -> trimesh.Trimesh:
+    vertices = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [np.nan, 0, 1], [0, 1, 1]]
+    return trimesh.Trimesh(vertices, [[0, 1, 2], [0, 1, 3], [0, 2, 4]], process=False)
+
+
+@pytest.mark.parametrize("suffix", [".obj", ".ply", ".stl", ".glb"])
+def test_a_nan_vertex_refuses_the_mesh_in_every_format(app, tmp_path, suffix):
+    data = _nan_mesh().export(file_type=suffix[1:])
+    data = data.encode() if isinstance(data, str) else data
+    path = tmp_path / f"nan{suffix}"
+    path.write_bytes(data)
+    scene = simcore.with_overrides(simcore.load_scene(), {"target.mesh": str(path)})
+    with pytest.raises(simcore.TargetError, match="NaN or infinite vertex coordinates"):
+        simcore.load_target(scene.target)  # the CLI's loading
+    upload(app, data, name=f"mesh{suffix}")  # and the app's
+    assert "the mesh has NaN or infinite vertex coordinates" in app.state.upload_error
+    assert not app.state.target_is_upload
+
+
+def test_a_refused_or_replaced_upload_leaves_no_file(app):
+    change(app, upload_scale=9000)  # the core refuses the converted mesh: 18 km long
+    upload(app, box_stl())
+    assert "targets must be" in app.state.upload_error
+    folder = app.uploads.files.path
+    assert list(folder.iterdir()) == []
+    change(app, upload_scale=1.0)
+    upload(app, box_stl())
+    first = app.uploads.current.path
+    assert app.state.target_is_upload and list(folder.iterdir()) == [first]
+    upload(app, box_stl((3.0, 1.0, 1.0)))  # replaced
+    assert list(folder.iterdir()) == [app.uploads.current.path] != [first]
+    outcome = upload_mod.load_uploaded(
+        app.uploads.builtin.scene, app.uploads.files.write(box_stl(), ".stl"), 1.0
+    )
+    app.uploads._finish(app.uploads._ticket - 1, outcome)  # an overtaken upload's late result
+    assert not outcome.path.exists()
+    app.uploads.use_builtin()
+    assert list(folder.iterdir()) == []
+
+
+class _Clock:
+    def __init__(self):
+        self.now_s = 0.0
+
+    def __call__(self) -> float:
+        return self.now_s
+
+
+def test_partial_messages_are_bounded_per_connection_in_total_and_in_time():
+    from wslink.chunking import _encode_header
+
+    from app.security import BoundedUnChunker, Limits, PendingBudget, Refused
+
+    limits = Limits(
+        message_bytes=1000,
+        connection_budget_bytes=1500,
+        total_budget_bytes=2500,
+        max_pending_messages=3,
+        partial_timeout_s=10.0,
+    )
+    budget, clock = PendingBudget(limits.total_budget_bytes), _Clock()
+    one = BoundedUnChunker(limits, budget, clock)
+    one.process_chunk(_encode_header(1, 0, 1000) + b"x" * 13)
+    with pytest.raises(Refused, match="connection's budget"):  # 1000 + 1000 > 1500
+        one.process_chunk(_encode_header(2, 0, 1000) + b"x" * 13)
+    assert budget.reserved_bytes == 1000 and len(bytes(one.pending[1].content)) == 13
+    two = BoundedUnChunker(limits, budget, clock)
+    two.process_chunk(_encode_header(1, 0, 1000) + b"y")
+    with pytest.raises(Refused, match="server's budget"):  # 2000 + 1000 > 2500
+        BoundedUnChunker(limits, budget, clock).process_chunk(_encode_header(1, 0, 1000))
+    with pytest.raises(Refused, match="out of order"):
+        two.process_chunk(_encode_header(1, 500, 1000) + b"y")
+    assert budget.reserved_bytes == 1000  # the broken message was dropped
+    for i in range(3):
+        two.process_chunk(_encode_header(10 + i, 0, 100) + b"z")
+    with pytest.raises(Refused, match="more than 3 partial"):
+        two.process_chunk(_encode_header(20, 0, 100) + b"z")
+    clock.now_s = 10.5
+    assert one.expired()
+    with pytest.raises(Refused, match="took over 10 s"):
+        one.process_chunk(_encode_header(1, 13, 1000) + b"x")
+    one.release_pending_messages()
+    two.release_pending_messages()
+    assert budget.reserved_bytes == 0
+    with pytest.raises(Refused, match="past the end"):
+        one.process_chunk(_encode_header(3, 0, 4) + b"12345")
+    with pytest.raises(Refused, match="undecodable"):
+        one.process_chunk(_encode_header(4, 0, 1) + b"\xc1")
+    assert budget.reserved_bytes == 0

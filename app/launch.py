@@ -4,13 +4,16 @@ the browser tests (tests/browser) and the benchmark (scripts/bench_app.py)."""
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import os
+import re
 import socket
 import subprocess
 import sys
 import tempfile
 import time
 import urllib.error
+import urllib.parse
 import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
@@ -47,12 +50,92 @@ def free_port(host: str = "127.0.0.1") -> int:
         return int(s.getsockname()[1])
 
 
+ADDRESS = re.compile(r"http://\S+")  # the address `lmapd app` prints, token included
+
+
 def _answers(url: str) -> bool:
     try:
         with urllib.request.urlopen(url, timeout=2) as response:
             return response.status == 200
     except (urllib.error.URLError, OSError):
         return False
+
+
+def printed_address(output: str) -> str | None:
+    """The address to open from the server's output: the first ``http://...`` on the line that
+    ``lmapd app`` prints once it listens (the access token is part of it)."""
+    for line in output.splitlines():
+        if line.startswith("lmapd-sim app: http://"):
+            found = ADDRESS.search(line)
+            return found.group(0) if found else None
+    return None
+
+
+@dataclasses.dataclass(frozen=True)
+class RunningApp:
+    """A started app server: the address it printed (with its token) and its process id."""
+
+    url: str
+    pid: int
+
+    @property
+    def port(self) -> int:
+        return int(urllib.parse.urlsplit(self.url).port or 80)
+
+    @property
+    def token(self) -> str:
+        return urllib.parse.parse_qs(urllib.parse.urlsplit(self.url).query)["token"][0]
+
+    @property
+    def origin(self) -> str:
+        parts = urllib.parse.urlsplit(self.url)
+        return f"{parts.scheme}://{parts.netloc}"
+
+
+@contextlib.contextmanager
+def app_process(
+    host: str = "127.0.0.1",
+    port: int | None = None,
+    scene: str | None = None,
+    timeout_s: float = 120.0,
+    log_path: Path | None = None,
+) -> Iterator[RunningApp]:
+    """Start ``python -m app`` on a free port, wait for the address it prints and for that address
+    to answer, yield it, stop the server.
+
+    Raises RuntimeError (with the server's output) if it exits or does not answer in time.
+    """
+    port = port or free_port(host)
+    cmd = [sys.executable, "-m", "app", "--host", host, "--port", str(port)]
+    if scene:
+        cmd += ["--scene", scene]
+    log_file = open(log_path, "w+b") if log_path else tempfile.TemporaryFile()  # noqa: SIM115
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen(cmd, cwd=REPO_DIR, stdout=log_file, stderr=subprocess.STDOUT, env=env)
+
+    def output() -> str:
+        log_file.seek(0)
+        return log_file.read().decode(errors="replace")
+
+    try:
+        deadline = time.monotonic() + timeout_s
+        url = None
+        while url is None or not _answers(url):
+            if proc.poll() is not None or time.monotonic() > deadline:
+                state = f"exited with {proc.returncode}" if proc.poll() is not None else "timed out"
+                raise RuntimeError(f"the app server {state} before answering:\n{output()[-4000:]}")
+            time.sleep(0.2)
+            url = url or printed_address(output())
+        yield RunningApp(url, proc.pid)
+    finally:
+        if proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait(timeout=10)
+        log_file.close()
 
 
 @contextlib.contextmanager
@@ -63,37 +146,9 @@ def app_server(
     timeout_s: float = 120.0,
     log_path: Path | None = None,
 ) -> Iterator[str]:
-    """Start ``python -m app`` on a free port, wait until it answers, yield its URL, stop it.
-
-    Raises RuntimeError (with the server's output) if it exits or does not answer in time.
-    """
-    port = port or free_port(host)
-    cmd = [sys.executable, "-m", "app", "--host", host, "--port", str(port)]
-    if scene:
-        cmd += ["--scene", scene]
-    url = f"http://{host}:{port}/"
-    log_file = open(log_path, "w+b") if log_path else tempfile.TemporaryFile()  # noqa: SIM115
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    proc = subprocess.Popen(cmd, cwd=REPO_DIR, stdout=log_file, stderr=subprocess.STDOUT, env=env)
-    try:
-        deadline = time.monotonic() + timeout_s
-        while not _answers(url):
-            if proc.poll() is not None or time.monotonic() > deadline:
-                log_file.seek(0)
-                output = log_file.read().decode(errors="replace")[-4000:]
-                state = f"exited with {proc.returncode}" if proc.poll() is not None else "timed out"
-                raise RuntimeError(f"the app server {state} before answering {url}:\n{output}")
-            time.sleep(0.2)
-        yield url
-    finally:
-        if proc.poll() is None:
-            proc.terminate()
-            try:
-                proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait(timeout=10)
-        log_file.close()
+    """:func:`app_process`, yielding only the address to open (``http://HOST:PORT/?token=...``)."""
+    with app_process(host, port, scene, timeout_s, log_path) as running:
+        yield running.url
 
 
 # JavaScript helpers evaluated in the page (window.trame is trame's client API).

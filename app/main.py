@@ -9,15 +9,18 @@ from __future__ import annotations
 import argparse
 import itertools
 import logging
+import secrets
 import sys
 
 from trame.app import get_server
 
 import simcore
+from app import security
 from app.engine import Engine
-from app.limits import cap_websocket_messages
+from app.logic import flyaround
 from app.logic.controller import AppLogic
 from app.logic.upload import TargetUploads
+from app.state import STATE_KEYS
 from app.ui.layout import build_layout
 
 _server_ids = itertools.count()
@@ -40,14 +43,19 @@ class LmapdApp:
         self.uploads = TargetUploads(self.logic, self.server)
         self.ui = build_layout(self.server)
         self.server.state.trame__title = "lmapd-sim"
+        self.token = secrets.token_urlsafe(32)  # this launch's access token
+        self.guard: security.Guard | None = None
+        self.door: security.Door | None = None
 
     @property
     def state(self):
         return self.server.state
 
-    def start(self, host: str, port: int) -> None:
-        """Serve until interrupted: no browser is opened and an idle server stays alive."""
+    def start(self, host: str, port: int, limits: security.Limits | None = None) -> None:
+        """Serve until interrupted: no browser is opened and an idle server stays alive. Only
+        the page at the printed address (it carries the access token) can connect."""
         trame_args = ["--host", host, "--port", str(port), "--server", "--timeout", "0"]
+        trame_args += ["--authKey", self.token]  # never the framework's public default
         cli = self.server.cli
         parse = cli.parse_known_args
         # trame reads sys.argv by default; give it exactly our options (sys.argv may hold
@@ -56,27 +64,57 @@ class LmapdApp:
             trame_args if args is None else args, namespace
         )
         self.server.controller.on_server_ready.add(self._announce)
-        cap_websocket_messages()
+        self.guard, self.door = security.install(
+            self.server, token=self.token, host=host, client_keys=client_keys(), limits=limits
+        )
         self.server.start(
             host=host, port=port, open_browser=False, timeout=0, show_connection_info=False
         )
 
     def _announce(self, **_) -> None:
-        for line in start_message(self.server.server_options.host, self.server.port):
+        host = self.server.server_options.host
+        for line in start_message(host, self.server.port, self.token):
             print(line, flush=True)
 
 
-LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
+LOOPBACK_HOSTS = security.LOOPBACK_NAMES
 
 
-def start_message(host: str, port: int) -> list[str]:
-    """What the server prints once it listens: its address, and a warning if other machines can
-    reach it (a --host other than the loopback interface)."""
-    lines = [f"lmapd-sim app: http://{host}:{port}/  (Ctrl+C stops it)"]
+def client_keys() -> dict[str, security.Screen]:
+    """The state keys a page may set, each with the screen its values pass at the door (the
+    controls' ranges are checked after, by app.state.sanitize_controls and the fly-around)."""
+    keys: dict[str, security.Screen] = {key: security.scalar for key in STATE_KEYS}
+    keys["materials"] = security.mapping_of_names
+    keys.update({key: security.scalar for key in flyaround.STATE_KEYS})
+    keys.update(
+        {
+            "fly_playing": security.scalar,
+            "main_drawer": security.boolean,
+            "upload_file": security.file_upload,
+            "upload_scale": security.scalar,
+            "upload_error": security.cleared,
+            "error_message": security.cleared,
+            "input_message": security.cleared,
+        }
+    )
+    return keys
+
+
+def app_address(host: str, port: int, token: str) -> str:
+    """The address to open: the page with this launch's access token."""
+    name = f"[{host}]" if ":" in host else host
+    return f"http://{name}:{port}/?token={token}"
+
+
+def start_message(host: str, port: int, token: str) -> list[str]:
+    """What the server prints once it listens: the address to open (on one line, with the access
+    token), and a warning if other machines can reach it (a --host other than loopback)."""
+    lines = [f"lmapd-sim app: {app_address(host, port, token)}  (Ctrl+C stops it)"]
     if host not in LOOPBACK_HOSTS:
         lines.append(
             f"lmapd-sim app: warning: listening on {host}, not only on this machine: anyone who "
-            "can reach this port can drive the simulator and upload meshes (no authentication)"
+            "can reach this port and has the address above (its token) can drive the simulator "
+            "and upload meshes"
         )
     return lines
 

@@ -13,6 +13,7 @@ import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from urllib.parse import urlsplit
 
 import simcore
 from app.launch import JS_FRAMES, JS_STATE, set_field, wait_first_frame, wait_settled
@@ -140,7 +141,7 @@ def run_soak(browser, url: str, n_changes: int = 300, settle_timeout_s: float = 
     """The soak on the app at ``url`` with a playwright ``browser``; returns the figures."""
     t_start = time.perf_counter()
     report = SoakReport()
-    pid = listening_pid(int(url.rstrip("/").rsplit(":", 1)[1]))
+    pid = listening_pid(urlsplit(url).port or 80)  # url: the printed address, token included
     viewport = {"width": 1600, "height": 1000}
     first = browser.new_context(viewport=viewport)
     page = first.new_page()

@@ -130,7 +130,10 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[64, 128, 256])
     parser.add_argument("--repeats", type=int, default=15)
-    parser.add_argument("--url", help="an app already running (default: start one)")
+    parser.add_argument(
+        "--url",
+        help="the address an app already running printed, token included (default: start one)",
+    )
     args = parser.parse_args(argv)
     problem = chromium_missing_message()
     if problem:

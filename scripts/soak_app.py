@@ -29,7 +29,11 @@ MAX_GROWTH_MB = 100.0
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--changes", type=int, default=300, help="slider changes (default 300)")
-    parser.add_argument("--url", default=None, help="an app already running on this machine")
+    parser.add_argument(
+        "--url",
+        default=None,
+        help="the address an app already running on this machine printed (with its token)",
+    )
     args = parser.parse_args(argv)
     problem = chromium_missing_message()
     if problem:
@@ -42,7 +46,7 @@ def main(argv: list[str] | None = None) -> int:
             report = run_soak(browser, url, n_changes=args.changes)
         finally:
             browser.close()
-    print(f"soak of {url}")
+    print(f"soak of {url.split('?')[0]}")
     for line in report.lines():
         print(f"  {line}")
     ok = (

@@ -260,10 +260,37 @@ def source_stamp(target: Target) -> tuple:
     return tuple(stamp)
 
 
+def load_mesh_file(
+    file_obj, file_type: str | None, **load_options
+) -> trimesh.Trimesh | trimesh.Scene:
+    """``trimesh.load`` of a mesh file that refuses NaN or infinite vertices in every format.
+
+    trimesh's default processing drops the triangles of non-finite vertices from OBJ, PLY and STL
+    files without a word (glTF is not processed), so the file is read unprocessed, checked, then
+    processed as trimesh would have (the same vertices and faces as a default load).
+
+    Raises
+    ------
+    TargetError
+        A vertex coordinate is NaN or infinite (the message names no file: callers add it).
+    """
+    loaded = trimesh.load(file_obj, file_type=file_type, force=None, process=False, **load_options)
+    geometries = loaded.geometry.values() if isinstance(loaded, trimesh.Scene) else [loaded]
+    meshes = [g for g in geometries if isinstance(g, trimesh.Trimesh)]
+    if not all(np.isfinite(g.vertices).all() for g in meshes):
+        raise TargetError("the mesh has NaN or infinite vertex coordinates")
+    if (file_type or "").lower().lstrip(".") not in ("glb", "gltf"):
+        for mesh in meshes:
+            mesh.process()
+    return loaded
+
+
 def _read_parts(path: Path) -> list[tuple[str, trimesh.Trimesh]]:
     """Read a mesh file as (part name, mesh) pairs with scene transforms applied."""
     try:
-        loaded = trimesh.load(path, force=None)
+        loaded = load_mesh_file(path, file_type=path.suffix.lstrip(".") or None)
+    except TargetError as exc:
+        raise TargetError(f"{path}: {exc}") from None
     except Exception as exc:  # trimesh raises many types for malformed files
         raise TargetError(f"{path}: cannot read the mesh ({type(exc).__name__}: {exc})") from None
     if isinstance(loaded, trimesh.Scene):

@@ -14,6 +14,7 @@ import sys
 import threading
 import time
 from pathlib import Path
+from urllib.parse import urlsplit
 
 import msgpack
 import numpy as np
@@ -80,12 +81,13 @@ def test_main_listens_on_loopback_unless_a_host_is_given(monkeypatch):
 def test_the_start_message_names_the_address_and_warns_off_loopback():
     from app.main import start_message
 
-    assert start_message("127.0.0.1", 8080) == [
-        "lmapd-sim app: http://127.0.0.1:8080/  (Ctrl+C stops it)"
+    assert start_message("127.0.0.1", 8080, "T0k-en_") == [
+        "lmapd-sim app: http://127.0.0.1:8080/?token=T0k-en_  (Ctrl+C stops it)"
     ]
-    lines = start_message("0.0.0.0", 9000)
-    assert lines[0].startswith("lmapd-sim app: http://0.0.0.0:9000/")
+    lines = start_message("0.0.0.0", 9000, "abc")
+    assert lines[0].startswith("lmapd-sim app: http://0.0.0.0:9000/?token=abc ")
     assert "warning: listening on 0.0.0.0, not only on this machine" in lines[1]
+    assert start_message("::1", 8080, "abc")[0].startswith("lmapd-sim app: http://[::1]:8080/?")
 
 
 def _listening_addresses(port: int) -> set[str]:
@@ -104,8 +106,8 @@ def _listening_addresses(port: int) -> set[str]:
 def test_the_server_binds_127_0_0_1_only_and_says_so_at_start(tmp_path):
     log_path = tmp_path / "server.log"
     with app_server(log_path=log_path) as url:
-        port = int(url.rsplit(":", 1)[1].strip("/"))
-        announced = f"lmapd-sim app: http://127.0.0.1:{port}/"
+        port = urlsplit(url).port
+        announced = f"lmapd-sim app: http://127.0.0.1:{port}/?token="
         deadline = time.monotonic() + 10
         while announced not in log_path.read_text() and time.monotonic() < deadline:
             time.sleep(0.1)
@@ -267,7 +269,7 @@ DEGENERATE = [
         + np.array([[0, 0, 1, 0, 0, 0, np.nan, 0, 0, 0, 1, 0]], np.float32).tobytes()
         + b"\0\0",
         "nan.stl",
-        "no triangles",  # trimesh drops NaN triangles; none is left
+        "the mesh has NaN or infinite vertex coordinates",  # not a triangle silently dropped
     ),
     (b"glTF\x02\x00\x00\x00" + b"\xff" * 40, "x.glb", "cannot read the .glb file"),
     (b"solid x\nfacet garbage\n", "x.stl", ""),
@@ -398,17 +400,107 @@ def test_the_fly_around_controls_survive_garbage_too(app, key):
 def test_websocket_messages_over_the_cap_are_refused_before_allocation():
     from wslink import chunking
 
-    from app.limits import MAX_MESSAGE_BYTES, cap_websocket_messages
+    from app.security import MAX_MESSAGE_BYTES, BoundedUnChunker, Limits, PendingBudget, Refused
 
-    cap_websocket_messages()
-    cap_websocket_messages()  # idempotent
-    unchunker = chunking.UnChunker()
+    limits = Limits()
+    unchunker = BoundedUnChunker(limits, PendingBudget(limits.total_budget_bytes))
     unchunker.set_max_message_size(4 * 1024**3)  # what wslink grants an authenticated client
-    assert unchunker.max_message_size == MAX_MESSAGE_BYTES
+    assert limits.message_bytes == MAX_MESSAGE_BYTES
     header = chunking._encode_header(7, 0, 2 * 1024**3)  # "a 2 GB message follows"
-    with pytest.raises(ValueError, match="exceeds the allocation limit"):
+    with pytest.raises(Refused, match="the limit is"):
         unchunker.process_chunk(header + b"x")
-    small = chunking.UnChunker()
-    small.set_max_message_size(4 * 1024**3)
+    assert not unchunker.pending and unchunker.budget.reserved_bytes == 0
     message = next(chunking.generate_chunks(msgpack.packb({"a": 1}), 0))
-    assert small.process_chunk(message) == {"a": 1}
+    assert unchunker.process_chunk(message) == {"a": 1}
+
+
+# -- issue 20: NaN meshes in every format, upload files, partial-message budgets ------------------
+def _nan_mesh() -> trimesh.Trimesh:
+    vertices = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [np.nan, 0, 1], [0, 1, 1]]
+    return trimesh.Trimesh(vertices, [[0, 1, 2], [0, 1, 3], [0, 2, 4]], process=False)
+
+
+@pytest.mark.parametrize("suffix", [".obj", ".ply", ".stl", ".glb"])
+def test_a_nan_vertex_refuses_the_mesh_in_every_format(app, tmp_path, suffix):
+    data = _nan_mesh().export(file_type=suffix[1:])
+    data = data.encode() if isinstance(data, str) else data
+    path = tmp_path / f"nan{suffix}"
+    path.write_bytes(data)
+    scene = simcore.with_overrides(simcore.load_scene(), {"target.mesh": str(path)})
+    with pytest.raises(simcore.TargetError, match="NaN or infinite vertex coordinates"):
+        simcore.load_target(scene.target)  # the CLI's loading
+    upload(app, data, name=f"mesh{suffix}")  # and the app's
+    assert "the mesh has NaN or infinite vertex coordinates" in app.state.upload_error
+    assert not app.state.target_is_upload
+
+
+def test_a_refused_or_replaced_upload_leaves_no_file(app):
+    change(app, upload_scale=9000)  # the core refuses the converted mesh: 18 km long
+    upload(app, box_stl())
+    assert "targets must be" in app.state.upload_error
+    folder = app.uploads.files.path
+    assert list(folder.iterdir()) == []
+    change(app, upload_scale=1.0)
+    upload(app, box_stl())
+    first = app.uploads.current.path
+    assert app.state.target_is_upload and list(folder.iterdir()) == [first]
+    upload(app, box_stl((3.0, 1.0, 1.0)))  # replaced
+    assert list(folder.iterdir()) == [app.uploads.current.path] != [first]
+    outcome = upload_mod.load_uploaded(
+        app.uploads.builtin.scene, app.uploads.files.write(box_stl(), ".stl"), 1.0
+    )
+    app.uploads._finish(app.uploads._ticket - 1, outcome)  # an overtaken upload's late result
+    assert not outcome.path.exists()
+    app.uploads.use_builtin()
+    assert list(folder.iterdir()) == []
+
+
+class _Clock:
+    def __init__(self):
+        self.now_s = 0.0
+
+    def __call__(self) -> float:
+        return self.now_s
+
+
+def test_partial_messages_are_bounded_per_connection_in_total_and_in_time():
+    from wslink.chunking import _encode_header
+
+    from app.security import BoundedUnChunker, Limits, PendingBudget, Refused
+
+    limits = Limits(
+        message_bytes=1000,
+        connection_budget_bytes=1500,
+        total_budget_bytes=2500,
+        max_pending_messages=3,
+        partial_timeout_s=10.0,
+    )
+    budget, clock = PendingBudget(limits.total_budget_bytes), _Clock()
+    one = BoundedUnChunker(limits, budget, clock)
+    one.process_chunk(_encode_header(1, 0, 1000) + b"x" * 13)
+    with pytest.raises(Refused, match="connection's budget"):  # 1000 + 1000 > 1500
+        one.process_chunk(_encode_header(2, 0, 1000) + b"x" * 13)
+    assert budget.reserved_bytes == 1000 and len(bytes(one.pending[1].content)) == 13
+    two = BoundedUnChunker(limits, budget, clock)
+    two.process_chunk(_encode_header(1, 0, 1000) + b"y")
+    with pytest.raises(Refused, match="server's budget"):  # 2000 + 1000 > 2500
+        BoundedUnChunker(limits, budget, clock).process_chunk(_encode_header(1, 0, 1000))
+    with pytest.raises(Refused, match="out of order"):
+        two.process_chunk(_encode_header(1, 500, 1000) + b"y")
+    assert budget.reserved_bytes == 1000  # the broken message was dropped
+    for i in range(3):
+        two.process_chunk(_encode_header(10 + i, 0, 100) + b"z")
+    with pytest.raises(Refused, match="more than 3 partial"):
+        two.process_chunk(_encode_header(20, 0, 100) + b"z")
+    clock.now_s = 10.5
+    assert one.expired()
+    with pytest.raises(Refused, match="took over 10 s"):
+        one.process_chunk(_encode_header(1, 13, 1000) + b"x")
+    one.release_pending_messages()
+    two.release_pending_messages()
+    assert budget.reserved_bytes == 0
+    with pytest.raises(Refused, match="past the end"):
+        one.process_chunk(_encode_header(3, 0, 4) + b"12345")
+    with pytest.raises(Refused, match="undecodable"):
+        one.process_chunk(_encode_header(4, 0, 1) + b"\xc1")
+    assert budget.reserved_bytes == 0

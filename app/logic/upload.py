@@ -35,6 +35,7 @@ import simcore
 from app.engine import Engine
 from app.logic.scene_map import resolved_materials
 from app.state import echo
+from simcore.target import TargetError, load_mesh_file
 
 log = logging.getLogger(__name__)
 
@@ -95,8 +96,10 @@ def self_contained_glb(data: bytes, suffix: str) -> tuple[bytes, int]:
     """Parse a mesh file from its bytes alone and re-encode it as one binary glTF (parts kept as
     its geometries); also return its triangle count. Raises UploadError for files that cannot
     be read, hold no triangles, too many, or non-finite vertices."""
-    try:
-        loaded = trimesh.load(io.BytesIO(data), file_type=suffix[1:], force=None, resolver=None)
+    try:  # NaN or infinite vertices are refused here, in every format (the core's check)
+        loaded = load_mesh_file(io.BytesIO(data), file_type=suffix[1:], resolver=None)
+    except TargetError as exc:
+        raise UploadError(str(exc)) from None
     except Exception as exc:  # trimesh raises many types for malformed files
         text = f"cannot read the {suffix} file ({type(exc).__name__}: {exc})"
         raise UploadError(text[:300]) from None
@@ -243,7 +246,11 @@ class TargetUploads:
         def work() -> LoadedTarget:
             glb, _ = self_contained_glb(content, suffix)
             path = self.files.write(glb, ".glb")
-            return load_uploaded(self.builtin.scene, path, scale)
+            try:
+                return load_uploaded(self.builtin.scene, path, scale)
+            except BaseException:
+                path.unlink(missing_ok=True)  # a refused upload leaves nothing on disk
+                raise
 
         self._start(work)
 
@@ -278,8 +285,9 @@ class TargetUploads:
         future.add_done_callback(lambda f: f.cancelled() or self._finish(ticket, f.result()))
 
     def _finish(self, ticket: int, outcome: LoadedTarget | str) -> None:
-        if ticket != self._ticket:
-            return  # overtaken by a newer upload or the built-in target
+        if ticket != self._ticket:  # overtaken by a newer upload or the built-in target
+            self._discard(outcome)
+            return
         with self.state:
             self.state.upload_busy = False
             if isinstance(outcome, str):
@@ -292,6 +300,12 @@ class TargetUploads:
                 f"{extent:.3g} m long"
             )
             self._switch(outcome, text)
+
+    def _discard(self, outcome: LoadedTarget | str) -> None:
+        """Remove the file of an upload that will never be shown (unless it is in use)."""
+        path = outcome.path if isinstance(outcome, LoadedTarget) else None
+        if path is not None and path != self.current.path:
+            path.unlink(missing_ok=True)
 
     def _fail(self, text: str) -> None:
         self.state.update({"upload_error": f"Upload refused: {text}", "upload_busy": False})

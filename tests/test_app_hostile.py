@@ -1,0 +1,328 @@
+"""A hostile client against the real app server, speaking wslink's protocol directly: foreign
+origins and missing tokens are refused before the upgrade; injected state keys are dropped and
+never reach another page; life-cycle and exit calls are refused and the simulation goes on;
+chunk floods close their connection with the server's memory bounded; malformed calls get one
+short message. The work of each test is bounded; waits have generous limits only to catch hangs.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import urllib.error
+import urllib.request
+
+import aiohttp
+import msgpack
+import pytest
+from hostile_client import Client, connect
+
+from app.launch import app_process
+from app.security import MAX_MESSAGE_BYTES, Limits
+from app.soak import rss_mb
+
+pytestmark = pytest.mark.slow
+
+INJECTED = {
+    "trame__template_main": '<img src=x onerror="window.pwned=1">',
+    "trame__inline_script_1": "window.pwned = 2",
+    "trame__scripts": ["http://evil.example/x.js"],
+    "not_a_key_of_the_app": "x",
+}
+
+
+@pytest.fixture(scope="module")
+def app(tmp_path_factory):
+    log_path = tmp_path_factory.mktemp("hostile") / "server.log"
+    with app_process(log_path=log_path) as running:
+        yield running
+
+
+def run(coroutine_fn, *args):
+    """Run ``coroutine_fn(session, *args)`` with a fresh aiohttp session."""
+
+    async def main():
+        async with aiohttp.ClientSession() as session:
+            return await coroutine_fn(session, *args)
+
+    return asyncio.run(main())
+
+
+def http_get(url: str, headers: dict | None = None) -> tuple[int, dict]:
+    request = urllib.request.Request(url, headers=headers or {})
+    try:
+        with urllib.request.urlopen(request, timeout=30) as response:
+            return response.status, dict(response.headers)
+    except urllib.error.HTTPError as exc:
+        return exc.code, dict(exc.headers)
+
+
+async def refused_status(session, app, **how) -> int | None:
+    try:
+        client = await connect(session, app, hello=False, **how)
+    except aiohttp.WSServerHandshakeError as exc:
+        return exc.status
+    await client.ws.close()
+    return None
+
+
+# -- 1. the door -----------------------------------------------------------------------------------
+def test_foreign_or_missing_origins_are_refused_before_the_upgrade(app):
+    other_port = f"http://127.0.0.1:{app.port + 1}"
+    origins = ["http://evil.example", other_port, "null", "file://", f"https://{app.origin[7:]}x"]
+
+    async def attempt(session):
+        statuses = [await refused_status(session, app, origin=o) for o in origins]
+        statuses.append(await refused_status(session, app, origin=None))  # no Origin at all
+        statuses.append(await refused_status(session, app))  # the page's own origin
+        return statuses
+
+    assert run(attempt) == [403] * (len(origins) + 1) + [None]
+
+
+def test_a_missing_or_wrong_token_is_refused(app):
+    async def attempt(session):
+        statuses = [await refused_status(session, app, token=t) for t in (None, "", "x" * 43)]
+        wrong = app.token[:-1] + ("A" if app.token[-1] != "A" else "B")
+        statuses.append(await refused_status(session, app, token=wrong))
+        return statuses
+
+    assert run(attempt) == [403, 403, 403, 403]
+
+
+def test_the_page_needs_the_token_and_the_address_sets_its_cookie(app):
+    base = app.origin + "/index.html"
+    assert http_get(base)[0] == 403
+    assert http_get(base + "?token=wrong")[0] == 403
+    status, headers = http_get(app.url)
+    assert status == 200
+    status, headers = http_get(base + f"?token={app.token}")
+    cookie = headers.get("Set-Cookie", "")
+    assert status == 200 and "HttpOnly" in cookie and "SameSite=Strict" in cookie
+    name_value = cookie.split(";")[0]
+    assert http_get(base, {"Cookie": name_value})[0] == 200
+
+    async def with_cookie(session):  # the page's websocket carries the cookie, not the query
+        headers = {"Origin": app.origin, "Cookie": name_value}
+        ws = await session.ws_connect(f"ws://127.0.0.1:{app.port}/ws", headers=headers)
+        answer = await Client(ws).hello("any secret: the token was checked at the upgrade")
+        await ws.close()
+        return answer
+
+    assert "result" in run(with_cookie)
+
+
+# -- 2. what a client may write --------------------------------------------------------------------
+def test_injected_keys_are_dropped_and_never_reach_another_page(app):
+    async def attack(session):
+        victim = await connect(session, app)
+        before = (await victim.call("trame.state.get"))["result"]["state"]
+        attacker = await connect(session, app)
+        answer = await attacker.set_state(**INJECTED, pitch_deg=7)
+        await victim.wait_state(lambda s: s.get("pitch_deg") == 7)
+        late = await connect(session, app)  # a page opened afterwards
+        after = (await late.call("trame.state.get"))["result"]["state"]
+        for c in (victim, attacker, late):
+            await c.ws.close()
+        return answer, victim, before, after
+
+    answer, victim, before, after = run(attack)
+    assert "result" in answer  # the page's other keys went through (no retry loop)
+    for key in INJECTED:
+        assert victim.seen(key) == [], key
+        assert after.get(key) == before.get(key), key
+    assert "window.pwned" not in str(after)
+    assert after["pitch_deg"] == 7
+
+
+def test_life_cycle_and_exit_calls_are_refused_and_the_simulation_goes_on(app):
+    calls = [
+        ("trame.lifecycle.update", ["server_exited"]),
+        ("trame.lifecycle.update", ["server_ready"]),
+        ("trame.lifecycle.update", ["exception"]),
+        ("application.exit", []),
+        ("application.exit.later", [0]),
+        ("trame.force.push", ["trame__template_main"]),
+        ("no.such.method", []),
+    ]
+
+    async def attack(session):
+        client = await connect(session, app)
+        state = (await client.call("trame.state.get"))["result"]["state"]
+        answers = [await client.call(m, a) for m, a in calls]
+        ok = await client.call("trame.lifecycle.update", ["client_connected"])
+        target = 12 if state["pitch_deg"] != 12 else 13
+        await client.set_state(pitch_deg=target)
+        generation = state["frame_generation"]
+        frame = await client.wait_state(
+            lambda s: s.get("frame_generation", 0) > generation and "n_points" in s
+        )
+        await client.ws.close()
+        return answers, ok, frame
+
+    answers, ok, frame = run(attack)
+    for (method, _), answer in zip(calls, answers, strict=True):
+        assert "error" in answer and "result" not in answer, method
+        assert "data" not in answer["error"] and len(answer["error"]["message"]) < 60
+    assert "result" in ok  # what the trame page itself reports is accepted
+    assert frame["n_points"] > 0
+
+
+def test_malformed_calls_get_one_short_message_and_no_trace(app):
+    malformed = [
+        ("trame.state.update", [[1]]),
+        ("trame.state.update", [{"key": 1}]),
+        ("trame.state.update", ["x"]),
+        ("trame.state.update", None),
+        ("trame.trigger", None),
+        ("trame.trigger", ["pixel_click", "x", {}]),
+        ("trame.trigger", [["pixel_click"], [], {}]),
+        ("trame.trigger", ["no_such_trigger", [], {}]),
+        ("trame.trigger", ["pixel_click", [], {"x": 1}, 4]),
+        ("trame.state.get", [1]),
+        ("trame.error.client", []),
+    ]
+
+    async def attack(session):
+        client = await connect(session, app)
+        answers = [await client.call(m, a) for m, a in malformed]
+        answers.append(await client.call("trame.trigger", ["pixel_click", [], {}], kwargs=[1]))
+        answers.append(await client.call(["not", "a", "name"], []))
+        still = await client.call("trame.state.get")
+        await client.ws.close()
+        return answers, still
+
+    answers, still = run(attack)
+    for answer in answers:
+        assert set(answer) == {"wslink", "id", "error"}, answer
+        text = str(answer["error"])
+        assert len(answer["error"]["message"]) < 60 and "data" not in answer["error"]
+        assert "Traceback" not in text and ".py" not in text and "/" not in text
+    assert "result" in still
+
+
+# -- 3. memory -------------------------------------------------------------------------------------
+def test_a_chunk_flood_closes_its_connection_with_bounded_server_memory(app):
+    """The issue's attack: 40 chunks of 13 bytes, each opening a new message that claims 48 MiB
+    (1.7 GB of server memory before)."""
+    claim = 48 * 2**20
+
+    async def flood(session):
+        client = await connect(session, app)
+        rss_before = rss_mb(app.pid)
+        closed_after = None
+        for i in range(40):
+            try:
+                await client.send_raw_chunk(1000 + i, 0, claim, b"x" * 13)
+                await asyncio.sleep(0)
+            except (ConnectionError, aiohttp.ClientConnectionError):
+                closed_after = i
+                break
+        try:
+            await client.receive_until(lambda m: False, wait_s=30)
+        except ConnectionError:
+            closed_after = closed_after if closed_after is not None else -1
+        healthy = await connect(session, app)  # the server still serves
+        answer = await healthy.call("trame.state.get")
+        await healthy.ws.close()
+        return rss_before, rss_mb(app.pid), closed_after, answer
+
+    rss_before, rss_after, closed_after, answer = run(flood)
+    assert closed_after is not None  # the connection was closed
+    assert rss_after - rss_before < 64, (rss_before, rss_after)
+    assert "result" in answer
+
+
+def test_partial_messages_of_all_connections_share_one_total_budget(app):
+    limits = Limits()
+    claim = 40 * 2**20  # fits one connection's budget (48 MiB) ...
+    n_fit = limits.total_budget_bytes // claim  # ... and 4 of them the server's (192 MiB)
+    assert claim <= limits.connection_budget_bytes == MAX_MESSAGE_BYTES
+
+    async def claims(session):
+        clients = [await connect(session, app) for _ in range(n_fit + 1)]
+        for client in clients:
+            await client.send_raw_chunk(7, 0, claim, b"y" * 10)
+        closed = []
+        for client in clients:
+            probe = await asyncio.wait_for(_answers(client), 60)
+            closed.append(not probe)
+        for client in clients:
+            await client.ws.close()
+        fresh = await connect(session, app)  # the budget was released with the connections
+        await fresh.send_raw_chunk(7, 0, claim, b"z" * 10)
+        alive = await _answers(fresh)
+        await fresh.ws.close()
+        return closed, alive
+
+    closed, alive = run(claims)
+    assert closed == [False] * n_fit + [True]
+    assert alive
+
+
+async def _answers(client: Client) -> bool:
+    """The connection still answers a call (False: the server closed it)."""
+    try:
+        answer = await client.call("trame.state.get")
+    except (ConnectionError, aiohttp.ClientConnectionError):
+        return False
+    return "result" in answer
+
+
+def test_connections_are_capped(app):
+    limit = Limits().max_connections
+
+    async def crowd(session):
+        clients = [await connect(session, app, hello=False) for _ in range(limit)]
+        status = await refused_status(session, app)
+        for client in clients:
+            await client.ws.close()
+        await asyncio.sleep(0.5)
+        after = await refused_status(session, app)
+        return status, after
+
+    assert run(crowd) == (503, None)
+
+
+# -- 5. per-page data and the last write -----------------------------------------------------------
+def test_an_upload_is_not_sent_to_other_pages(app):
+    content = b"solid box\nendsolid box\n" + b"#" * 200_000
+
+    async def upload(session):
+        uploader = await connect(session, app)
+        watcher = await connect(session, app)
+        upload = {"name": "box.stl", "size": len(content), "content": content}
+        await uploader.set_state(upload_file=upload, pitch_deg=3)
+        await watcher.wait_state(lambda s: s.get("pitch_deg") == 3)
+        await watcher.wait_state(lambda s: "Upload refused" in str(s.get("upload_error")))
+        for c in (uploader, watcher):
+            await c.ws.close()
+        return watcher
+
+    watcher = run(upload)
+    assert all(v is None for v in watcher.seen("upload_file"))
+    assert not any(b"#" * 1000 in msgpack.packb(s) for s in watcher.states)
+
+
+def test_the_last_write_wins_on_every_page(app):
+    """Page B's unsent change is overwritten by A's value (trame's page does that), and B then
+    sends A's value back after A moved on: B's echo must not win over A's newer value."""
+
+    async def race(session):
+        a, b, c = [await connect(session, app) for _ in range(3)]
+        await a.set_state(azimuth_deg=10)
+        await b.wait_state(lambda s: s.get("azimuth_deg") == 10)
+        await a.set_state(azimuth_deg=11)  # A's last write
+        await b.set_state(azimuth_deg=10)  # B's flush of the value it was sent: an echo
+        await c.wait_state(lambda s: s.get("azimuth_deg") == 11)
+        await b.set_state(pitch_deg=-5)  # B's own later write wins
+        await a.wait_state(lambda s: s.get("pitch_deg") == -5)
+        await c.wait_state(lambda s: s.get("pitch_deg") == -5)
+        final = (await c.call("trame.state.get"))["result"]["state"]
+        for p in (a, b, c):
+            await p.ws.close()
+        return final, a, c
+
+    final, a, c = run(race)
+    assert (final["azimuth_deg"], final["pitch_deg"]) == (11, -5)
+    assert c.seen("azimuth_deg")[-1] == 11 and 10 not in c.seen("azimuth_deg")[1:]
+    assert a.seen("azimuth_deg") in ([], [11])  # A is never sent its own values

@@ -209,7 +209,7 @@ def write_las(path: str | Path, cloud: PointCloud, comments: tuple[str, ...] = (
     """
     import laspy  # noqa: PLC0415  (only for LAS files)
 
-    from . import __version__  # noqa: PLC0415  (the package is imported by now)
+    from ._version import __version__  # noqa: PLC0415
 
     header = laspy.LasHeader(point_format=_LAS_POINT_FORMAT, version="1.4")
     header.add_extra_dims(
@@ -321,7 +321,7 @@ def write_waveforms_hdf5(path: str | Path, result) -> None:
     """
     import h5py  # noqa: PLC0415  (only for HDF5 files)
 
-    from . import __version__  # noqa: PLC0415
+    from ._version import __version__  # noqa: PLC0415
 
     cube = waveform_cube(result)
     with atomic_path(path) as tmp:

@@ -1,6 +1,6 @@
 """`lmapd bench` machinery (not its timings: those are printed, never asserted)."""
 
-from simcore import bench
+from simcore.cli.bench import stages as bench
 
 
 def test_the_memory_probe_runs_in_a_fresh_process_and_reports_its_high_water_mark():

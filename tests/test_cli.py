@@ -136,3 +136,13 @@ def test_an_internal_error_is_one_line_unless_debugging(monkeypatch, tmp_path, c
     monkeypatch.setenv("LMAPD_DEBUG", "1")
     with pytest.raises(RuntimeError, match="boom"):
         cli.main(["simulate", "--set", "pixels=8", "--out", str(tmp_path / "c.ply")])
+
+
+def test_the_constants_the_help_shows_without_loading_the_library_are_the_librarys():
+    from simcore import flyaround, orbit, sweep
+    from simcore.cli import flyaround as fly_cli
+    from simcore.cli import sweep as sweep_cli
+
+    assert fly_cli.DEFAULT_INTERVAL_S == flyaround.DEFAULT_INTERVAL_S
+    assert fly_cli.PAPER_PERIOD_S == orbit.PAPER_PERIOD_S
+    assert sweep_cli.CLOUD_FORMATS == sweep.spec.CLOUD_FORMATS

@@ -17,15 +17,8 @@ from plyfile import PlyData
 import simcore
 from simcore import io, orbit
 from simcore.cli import CliError
-from simcore.flyaround import (
-    JSON_NAME,
-    PNG_NAME,
-    add_parser,
-    frame_filename,
-    plot_flyaround,
-    run_cli,
-    run_flyaround,
-)
+from simcore.cli.flyaround import JSON_NAME, PNG_NAME, add_parser, plot_flyaround, run_cli
+from simcore.flyaround import frame_filename, run_flyaround
 
 FAST = {"pixels": 32, "fidelity.subrays": 1}
 TIMES_S = np.array([0.0, 1500.0, 3000.0])

@@ -19,7 +19,8 @@ import pytest
 import simcore
 from simcore import receiver
 from simcore.cli import CliError
-from simcore.reproduce import ITEMS, REPORT_NAME, add_parser, run_cli, run_reproduction
+from simcore.cli.reproduce import add_parser, run_cli
+from simcore.cli.reproduce.report import ITEMS, REPORT_NAME, run_reproduction
 
 pytestmark = pytest.mark.slow  # two quick runs, ~8 s each
 

@@ -25,11 +25,11 @@ import pytest
 import simcore
 from simcore import io
 from simcore.cli import CliError
+from simcore.cli.sweep import add_parser
 from simcore.sweep import (
     METRICS,
     TABLE_NAME,
     SweepError,
-    add_parser,
     build_sweep,
     frame_id,
     load_sweep,
@@ -260,9 +260,10 @@ KILL_AFTER = 3  # frames the first run finishes before it is killed
 KILLER = """
 import os, signal, sys
 import simcore.sweep as sw
+import simcore.sweep.run as sweep_run
 
 if __name__ == "__main__":
-    original, done = sw._record, []
+    original, done = sweep_run._record, []
 
     def record(*args):
         original(*args)
@@ -270,7 +271,7 @@ if __name__ == "__main__":
         if len(done) == {kill_after}:
             os.kill(os.getpid(), signal.SIGKILL)  # no clean-up: as kill -9 or a lost node
 
-    sw._record = record
+    sweep_run._record = record
     sw.run_sweep(sw.load_sweep(sys.argv[1]), sys.argv[2], workers=2, progress=False)
 """
 

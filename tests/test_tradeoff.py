@@ -5,7 +5,7 @@ import json
 import numpy as np
 
 import simcore
-from simcore import tradeoff
+from simcore.cli.bench import tradeoff
 from simcore.scene import PRESETS
 
 

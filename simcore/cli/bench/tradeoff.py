@@ -16,10 +16,11 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from .echo import echo_waveform
-from .io import atomic_path, write_json
-from .pipeline import Pipeline, Result
-from .scene import PRESETS, load_scene, with_overrides
+from ...echo import echo_waveform
+from ...io import atomic_path, write_json
+from ...pipeline import Pipeline, Result
+from ...scene import PRESETS, load_scene, with_overrides
+from ..common import say
 
 ATTITUDES = (
     {"pitch_deg": 0.0, "azimuth_deg": 0.0},  # the paper's front view
@@ -214,8 +215,6 @@ def main(out_dir: str, quick: bool = False, pixels: int | None = None) -> int:
     fig["summary"] = summary(fig)
     write_json(out / "tradeoff.json", fig)
     plot(fig, out / "tradeoff.png")
-    from .cli import say  # noqa: PLC0415
-
     say(f"{n} x {n} pixels, the paper scene at {len(ATTITUDES)} attitudes:")
     say(
         "| preset | median time (ms): all / hits / echo | speed-up vs "

@@ -14,16 +14,17 @@ import time
 
 from tqdm import tqdm
 
-from .pipeline import STAGES, Pipeline
-from .scene import load_scene, with_overrides
-from .target import load_target
+from ...pipeline import STAGES, Pipeline
+from ...scene import load_scene, with_overrides
+from ...target import load_target
+from ..common import say
 
 FRAME_STAGES = ("hits", "echo", "receiver", "detection", "cloud")
 
 _MEMORY_PROBE = r"""
 import sys
 import simcore
-from simcore.bench import high_water_mb
+from simcore.cli.bench.stages import high_water_mb
 simcore.load_target(simcore.load_scene().target)
 base = high_water_mb()
 simcore.simulate(pixels={pixels}, overrides={{"fidelity.subrays": {subrays}}})
@@ -72,7 +73,7 @@ def run(quick: bool = False) -> dict:
     t0 = time.perf_counter()
     model = load_target(scene.target)
     t_load = time.perf_counter() - t0
-    from .geometry import RayCaster  # noqa: PLC0415
+    from ...geometry import RayCaster  # noqa: PLC0415
 
     t0 = time.perf_counter()
     RayCaster(model)
@@ -133,12 +134,10 @@ def format_table(fig: dict) -> str:
 
 
 def main(quick: bool = False, json_path: str | None = None) -> int:
-    from .cli import say  # noqa: PLC0415
-
     fig = run(quick=quick)
     say(format_table(fig))
     if json_path:
-        from .io import write_json  # noqa: PLC0415
+        from ...io import write_json  # noqa: PLC0415
 
         write_json(json_path, fig)
     return 0

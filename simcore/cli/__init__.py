@@ -1,0 +1,72 @@
+"""The ``lmapd`` command: simulate one flash, list scene keys, benchmark, serve the app.
+
+    lmapd simulate [SCENE.toml] [--set NAME=VALUE ...] --out cloud.ply
+                   [--summary summary.json] [--waveforms waveforms.npz]
+    lmapd keys [--markdown]
+    lmapd bench [--quick] [--json FILE] [--tradeoff --out DIR [--pixels N]]
+    lmapd app [--host 127.0.0.1] [--port 8080] [--scene SCENE]
+    lmapd flyaround [SCENE.toml] [--set NAME=VALUE ...] --out DIR [--interval-s 300]
+                    [--duration-s SECONDS] [--j2]
+    lmapd reproduce --out DIR [--quick] [--seed N]
+    lmapd sweep SWEEP.toml --out DIR [--scheduler ADDRESS] [--workers N]
+
+One module per subcommand (``add_parser`` registers it, ``run_cli`` runs it), ``common`` for what
+they share. Errors in the user's input (unknown key, value out of range, missing or broken file)
+print one message naming what is wrong and exit with status 2; no output file is left
+half-written. Nothing outside this package imports it: it is the front end of the library.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+from . import app, bench, flyaround, keys, reproduce, simulate, sweep
+from .common import EXIT_USAGE, CliError, say
+
+__all__ = ["EXIT_USAGE", "CliError", "build_parser", "main", "say"]
+
+SUBCOMMANDS = (simulate, keys, bench, app, flyaround, reproduce, sweep)  # in --help's order
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``lmapd`` parser with every subcommand registered."""
+    parser = argparse.ArgumentParser(
+        prog="lmapd", description="Space-based LM-APD flash-lidar imaging simulator"
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+    for module in SUBCOMMANDS:
+        module.add_parser(sub)
+    return parser
+
+
+def _user_errors() -> tuple[type[BaseException], ...]:
+    """The exception types that are the user's input, not a bug (imported when needed)."""
+    from ..scene import SceneError  # noqa: PLC0415
+    from ..target import TargetError  # noqa: PLC0415  (loaded by then if it could be raised)
+
+    return (CliError, SceneError, TargetError, FileNotFoundError)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run ``lmapd`` with ``argv`` (default ``sys.argv[1:]``); the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except KeyboardInterrupt:
+        print("lmapd: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:
+        if isinstance(exc, _user_errors()):
+            print(f"lmapd: error: {exc}", file=sys.stderr)
+            return EXIT_USAGE
+        if os.environ.get("LMAPD_DEBUG"):  # a bug, not the user's input: one line, or the trace
+            raise
+        print(
+            f"lmapd: internal error: {type(exc).__name__}: {exc} (a bug: please report it; "
+            "LMAPD_DEBUG=1 shows the traceback)",
+            file=sys.stderr,
+        )
+        return 1

@@ -1,0 +1,34 @@
+"""``lmapd app``: serve the browser app (the ``app`` package, installed with ``.[app]``).
+
+lmapd app [--host 127.0.0.1] [--port 8080] [--scene SCENE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+from typing import Any
+
+from .common import CliError
+
+
+def add_parser(subparsers: Any) -> argparse.ArgumentParser:
+    """Register the ``app`` subcommand on ``subparsers`` (from ``add_subparsers``)."""
+    app = subparsers.add_parser("app", help="serve the browser app (127.0.0.1:8080)")
+    app.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
+    app.add_argument("--port", type=int, default=8080)
+    app.add_argument("--scene", help="scene TOML file or built-in name (default: paper)")
+    app.set_defaults(func=run_cli)
+    return app
+
+
+def run_cli(args: argparse.Namespace) -> int:
+    """Serve the app until it is stopped; its exit status."""
+    try:
+        app_main = importlib.import_module("app.main")
+    except ImportError as exc:
+        raise CliError(f"the app is not installed ({exc}); pip install -e '.[app]'") from None
+    argv = ["--host", args.host, "--port", str(args.port)]
+    if args.scene:
+        argv += ["--scene", args.scene]
+    return app_main.main(argv) or 0

@@ -1,0 +1,203 @@
+"""The package layout of issue 14: the physics library loads no front-end library, the commands
+live in ``simcore/cli/`` and nothing else imports them, and no module imports itself in a circle.
+
+The import graph is read from the source (every ``import`` of every module, those inside functions
+included, ``if TYPE_CHECKING:`` blocks left out), so a circle held together by a function-level
+import is found as surely as one at the top of a module.
+"""
+
+from __future__ import annotations
+
+import ast
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+FRONT_END = ("matplotlib", "dask", "distributed", "pyarrow", "h5py", "laspy", "argparse")
+
+
+def module_name(path: Path) -> str:
+    """``simcore/sweep/run.py`` -> ``simcore.sweep.run``; an ``__init__`` is its package."""
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def project_modules(*packages: str) -> dict[str, Path]:
+    """Every module of ``packages`` (dotted name -> file)."""
+    return {module_name(p): p for pkg in packages for p in sorted((ROOT / pkg).rglob("*.py"))}
+
+
+def imported_modules(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
+    """The project modules that module ``name`` imports, relative imports resolved.
+
+    ``import X`` is an edge to ``X``; ``from X import a`` to ``X.a`` when that is a module, else to
+    ``X``. Every import counts: those inside functions and under ``if TYPE_CHECKING:`` too (a
+    type-only import is still a dependency of the module's design).
+    """
+    package = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package[: len(package) - (node.level - 1)]
+                source = ".".join(base + ([node.module] if node.module else []))
+            else:
+                source = node.module or ""
+            for alias in node.names:
+                sub = f"{source}.{alias.name}"
+                found.add(sub if sub in modules else source)
+    return {n for n in found if n in modules and n != name}
+
+
+def import_graph(*packages: str) -> dict[str, set[str]]:
+    """Module -> the project modules it imports (a package's implicit import of its parent
+    package is no edge: it is how packages work, not a dependency the code chose)."""
+    modules = project_modules(*packages)
+    return {name: imported_modules(name, path, modules) for name, path in modules.items()}
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components with more than one module (Tarjan), each sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return found
+
+
+def test_the_cycle_finder_finds_a_circle_through_a_function_level_import(tmp_path, monkeypatch):
+    pkg = tmp_path / "pkg"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "a.py").write_text("from . import b\n")
+    (pkg / "b.py").write_text("def f():\n    from .a import g\n")
+    (pkg / "c.py").write_text(
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from . import d\n"
+    )
+    (pkg / "d.py").write_text("from pkg.c import x\nfrom pkg import a\n")
+    monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
+    assert cycles(import_graph("pkg")) == [["pkg.a", "pkg.b"], ["pkg.c", "pkg.d"]]
+
+
+def test_no_module_of_simcore_imports_itself_through_a_circle():
+    assert cycles(import_graph("simcore")) == []
+
+
+@pytest.mark.xfail(
+    strict=False,
+    reason="app/logic/controller.py <-> app/logic/flyaround.py: being removed on another branch "
+    "(issue 14, item 5); drop this mark once it is merged",
+)
+def test_no_module_of_the_app_imports_itself_through_a_circle():
+    assert cycles(import_graph("app")) == []
+
+
+def test_nothing_outside_simcore_cli_imports_the_commands():
+    importers = []
+    for package in ("simcore", "app", "scripts"):
+        for name, path in project_modules(package).items():
+            if name == "simcore.cli" or name.startswith("simcore.cli."):
+                continue
+            names = imported_modules(name, path, project_modules("simcore"))
+            if any(n == "simcore.cli" or n.startswith("simcore.cli.") for n in names):
+                importers.append(name)
+    assert importers == []
+
+
+PROBE = r"""
+import builtins, importlib, json, sys
+
+front_end = set(sys.argv[1].split(","))
+library = sys.argv[2].split(",")
+importers = []
+real_import = builtins.__import__
+
+def spy(name, globals=None, locals=None, fromlist=(), level=0):
+    who = (globals or {}).get("__name__", "")
+    if level == 0 and name.partition(".")[0] in front_end and who.startswith("simcore"):
+        importers.append([who, name])
+    return real_import(name, globals, locals, fromlist, level)
+
+builtins.__import__ = spy
+import simcore
+after_import = sorted(m for m in front_end if m in sys.modules)
+for name in library:
+    importlib.import_module(name)
+for name in simcore.__all__:
+    getattr(simcore, name)
+print(json.dumps({"after_import": after_import, "library": library, "importers": importers,
+                  "loaded": sorted(m for m in front_end - {"argparse"} if m in sys.modules)}))
+"""
+
+
+def test_the_library_loads_no_front_end_library_on_import():
+    """``import simcore``, then every library module and public name: no matplotlib, Dask,
+    pyarrow, h5py or laspy in ``sys.modules``, and no simcore module imports argparse (scipy and
+    trimesh load argparse themselves, through ``numpy.testing`` and ``numpy.f2py``; that is
+    theirs, so argparse is checked by importer)."""
+    library = [m for m in project_modules("simcore") if not m.startswith("simcore.cli")]
+    done = subprocess.run(
+        [sys.executable, "-c", PROBE, ",".join(FRONT_END), ",".join(library)],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=ROOT,
+    )
+    probe = json.loads(done.stdout)
+    assert probe["after_import"] == []
+    assert {"simcore.pipeline", "simcore.sweep.run", "simcore.reproduce"} <= set(probe["library"])
+    assert probe["loaded"] == []
+    assert probe["importers"] == []
+
+
+def test_lmapd_help_does_not_load_the_imaging_chain():
+    code = (
+        "import sys; from simcore.cli import build_parser; build_parser(); "
+        "print(sorted(m for m in ('numpy', 'simcore.pipeline', 'trimesh') if m in sys.modules))"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT
+    )
+    assert done.stdout.strip() == "[]"
+
+
+def test_the_public_names_are_the_lazy_exports_and_resolve():
+    import simcore
+
+    assert set(simcore.__all__) == set(simcore._EXPORTS)
+    assert simcore.Pipeline is __import__("simcore.pipeline").pipeline.Pipeline
+    assert simcore.io.CLOUD_SUFFIXES == (".ply", ".las")  # a submodule by attribute
+    with pytest.raises(AttributeError):
+        simcore.no_such_name  # noqa: B018

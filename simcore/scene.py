@@ -20,8 +20,6 @@ from typing import Any
 
 import tomli_w
 
-from .receivers import DEFAULT_KIND, kinds
-
 ASSETS_DIR = Path(__file__).resolve().parent.parent / "assets"
 SCENES_DIR = ASSETS_DIR / "scenes"
 
@@ -212,13 +210,25 @@ class Fidelity:
     )
 
 
+# The valid values of ``receiver.kind``: the built-in receivers (``simcore.receivers.BUILT_IN``
+# names the module of each), then those a module registers (``simcore.receivers.register`` adds
+# them here). The scene holds only the names, so it depends on no receiver.
+DEFAULT_RECEIVER = "lm_apd"
+RECEIVER_KINDS: list[str] = [DEFAULT_RECEIVER]
+
+
+def receiver_kinds() -> tuple[str, ...]:
+    """The valid values of ``receiver.kind``: the built-in receivers, then the registered ones."""
+    return tuple(RECEIVER_KINDS)
+
+
 @dataclass(frozen=True)
 class ReceiverSelection:
     kind: str = _f(
-        DEFAULT_KIND,
+        DEFAULT_RECEIVER,
         "-",
         doc="the receiver behind the optics: lm_apd (the linear-mode APD chain, Eqs. 7-28)",
-        choices=kinds,
+        choices=receiver_kinds,
     )
 
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import tempfile
 import tomllib
 import warnings
 import zipfile
@@ -180,12 +181,13 @@ def _read_cached(file: Path) -> MeshGeometry | None:
 
 
 def _write_cached(file: Path, geometry: MeshGeometry) -> None:
-    """Write ``geometry`` to ``file`` atomically; an unwritable cache only warns."""
-    from .io import atomic_path  # noqa: PLC0415  (io loads the point-cloud writers)
-
+    """Write ``geometry`` to ``file`` atomically (a temporary file renamed over it: a reader sees
+    the old entry, the new one, or none); an unwritable cache only warns."""
+    tmp = None
     try:
         file.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_path(file) as tmp, open(tmp, "wb") as fh:
+        with tempfile.NamedTemporaryFile(dir=file.parent, suffix=".part", delete=False) as fh:
+            tmp = Path(fh.name)
             np.savez(
                 fh,
                 vertices=geometry.vertices,
@@ -193,8 +195,11 @@ def _write_cached(file: Path, geometry: MeshGeometry) -> None:
                 face_part=geometry.face_part,
                 part_names=np.array(geometry.part_names, dtype=str),
             )
+        os.replace(tmp, file)
         _prune(file.parent)
     except OSError as exc:
+        if tmp is not None:
+            tmp.unlink(missing_ok=True)
         warnings.warn(
             f"target cache {file.parent} is not writable ({exc}); the mesh is read from its "
             f"file each time (set {CACHE_ENV} to another folder, or to off)",

@@ -43,8 +43,9 @@ def test_a_registered_receiver_is_a_valid_kind_and_listed_in_the_key_reference(i
 
 def test_the_ideal_receiver_runs_through_the_pipeline(ideal, plate_scene):
     pipe = simcore.Pipeline()
-    lm = pipe.run(plate_scene(**SMALL))
-    res = pipe.run(plate_scene(**SMALL, **{"receiver.kind": KIND}))
+    scene = plate_scene(**SMALL)  # writes the plate's mesh file once
+    lm = pipe.run(scene)
+    res = pipe.run(simcore.with_overrides(scene, {"receiver.kind": KIND}))
     ran = {s for s in simcore.STAGES if res.timings_s[s] > 0}
     assert ran == {"receiver", "detection", "cloud"}  # the echoes are the LM-APD run's
     assert res.echo is lm.echo

@@ -27,15 +27,15 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..detection import Outliers
+from ..scene import DEFAULT_RECEIVER, RECEIVER_KINDS, Scene, receiver_kinds
 from ..stage import Stage, readonly
 
 if TYPE_CHECKING:
     from ..echo import EchoStage
-    from ..scene import Scene
 
 # kind -> the module that registers it when imported
 BUILT_IN = {"lm_apd": "simcore.receivers.lm_apd"}
-DEFAULT_KIND = "lm_apd"
+DEFAULT_KIND = DEFAULT_RECEIVER
 _REGISTERED: dict[str, Receiver] = {}
 
 
@@ -105,17 +105,21 @@ def register(receiver: Receiver) -> Receiver:
     if known is not None and known is not receiver:
         raise ValueError(f"receiver kind {receiver.kind!r} is already registered")
     _REGISTERED[receiver.kind] = receiver
+    if receiver.kind not in RECEIVER_KINDS:
+        RECEIVER_KINDS[len(BUILT_IN) :] = sorted({*RECEIVER_KINDS[len(BUILT_IN) :], receiver.kind})
     return receiver
 
 
 def unregister(kind: str) -> None:
     """Forget a registered receiver (a built-in one comes back on its next use)."""
     _REGISTERED.pop(kind, None)
+    if kind not in BUILT_IN and kind in RECEIVER_KINDS:
+        RECEIVER_KINDS.remove(kind)
 
 
 def kinds() -> tuple[str, ...]:
     """The valid values of ``receiver.kind``: the built-in receivers, then the registered ones."""
-    return (*BUILT_IN, *sorted(set(_REGISTERED) - set(BUILT_IN)))
+    return receiver_kinds()
 
 
 def get(kind: str) -> Receiver:

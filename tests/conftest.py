@@ -4,26 +4,10 @@ from __future__ import annotations
 
 import os
 
-import numpy as np
 import pytest
-import trimesh
+from mesh_files import write_plates
 
 import simcore
-
-
-def write_plates(path, plates):
-    """Write square plates facing -z (towards a lidar looking along +z) as one OBJ.
-
-    plates : list of (size_m, z_offset_m, tilt_deg about the y axis)
-    """
-    meshes = []
-    for size, z, tilt in plates:
-        box = trimesh.creation.box(extents=(size, size, 1e-3))
-        box.apply_transform(trimesh.transformations.rotation_matrix(np.radians(tilt), (0, 1, 0)))
-        box.apply_translation((0, 0, z))
-        meshes.append(box)
-    trimesh.util.concatenate(meshes).export(path)
-    return str(path)
 
 
 @pytest.fixture

@@ -172,7 +172,8 @@ class Fidelity:
         0.0,
         1e-7,
         "waveform time step; 0 = auto min(tau/10, 1/(20 B)); else at least 10 ps and "
-        "tau/1000 (a pulse spans at most 1000 samples)",
+        "tau/1000 (a pulse spans at most 1000 samples); with the montecarlo noise model the "
+        "range gate spans at most 65536 samples",
     )
     refine_subrays: int = _f(
         0, "1", 0, 1024, "sub-rays for mixed pixels (edges, depth steps); 0 = no refinement"
@@ -400,11 +401,20 @@ def _validate_fields(obj, prefix: str, names=None) -> None:
 
 MIN_TIME_STEP_S = 1e-11  # [s] the finest waveform time step (a 256 x 256 frame: ~3 s, ~0.6 GB)
 MAX_SAMPLES_PER_PULSE = 1000  # [-] pulse width / time step at most
+MAX_GATE_SAMPLES = 2**16  # [-] Monte Carlo samples per pixel over the gate (1 km at auto: 16k)
+SPEED_OF_LIGHT_M_S = 299_792_458.0  # [m/s] exact (SI)
+
+
+def auto_time_step_s(scene: Scene) -> float:
+    """The waveform time step of ``fidelity.time_step_s = 0``: min(tau / 10, 1 / (20 B)) [s]
+    (= ``echo.default_time_step_s``, which this module does not import: it loads no numpy)."""
+    return min(scene.laser.pulse_width_s / 10.0, 1.0 / (20.0 * scene.detector.bandwidth_hz))
 
 
 def _check_time_step(scene: Scene) -> None:
-    """fidelity.time_step_s is 0 (auto) or at least MIN_TIME_STEP_S and tau / 1000: no value in
-    range can make the echo windows exhaust memory or time."""
+    """fidelity.time_step_s is 0 (auto) or at least MIN_TIME_STEP_S and tau / 1000, and the
+    Monte Carlo model's waveform over the range gate has at most MAX_GATE_SAMPLES samples: no
+    value in range can make the echo windows exhaust memory or time."""
     dt = scene.fidelity.time_step_s
     tau = scene.laser.pulse_width_s
     floor_s = max(MIN_TIME_STEP_S, tau / MAX_SAMPLES_PER_PULSE)
@@ -412,6 +422,17 @@ def _check_time_step(scene: Scene) -> None:
         raise SceneError(
             f"fidelity.time_step_s = {dt:g} s is too fine: give 0 (auto) or at least "
             f"{floor_s:g} s (10 ps, and laser.pulse_width_s / {MAX_SAMPLES_PER_PULSE})"
+        )
+    if scene.fidelity.noise_model != "montecarlo":
+        return
+    step_s = dt or auto_time_step_s(scene)
+    samples = 2.0 * scene.timing.range_gate_m / SPEED_OF_LIGHT_M_S / step_s
+    if samples > MAX_GATE_SAMPLES:
+        raise SceneError(
+            f"timing.range_gate_m = {scene.timing.range_gate_m:g} m at a time step of "
+            f"{step_s:.3g} s is {samples:.3g} samples per pixel for fidelity.noise_model = "
+            f"montecarlo (at most {MAX_GATE_SAMPLES}): shorten the gate or give a coarser "
+            "fidelity.time_step_s"
         )
 
 

@@ -235,3 +235,24 @@ def test_a_killed_runs_temporary_files_are_hidden_and_removed_by_the_next_run(tm
     assert cli.main(["simulate", "--out", str(out), *SMALL]) == 0, capsys.readouterr().err
     assert not stale.exists() and mine.exists() and other.exists()
     assert _visible(tmp_path) == ["c.ply"]
+
+
+def test_a_monte_carlo_gate_of_too_many_samples_is_refused_naming_the_keys(tmp_path, capsys):
+    out = tmp_path / "c.ply"
+    argv = ["simulate", "--set", "fidelity.noise_model=montecarlo", "--out", str(out)]
+    assert cli.main([*argv, "--set", "fidelity.time_step_s=1e-11", *SMALL]) == 2
+    err = _one_clear_line(capsys)
+    assert "timing.range_gate_m" in err and "fidelity.time_step_s" in err and "65536" in err
+    assert cli.main([*argv, "--set", "timing.range_gate_m=1e6", *SMALL]) == 2
+    assert "timing.range_gate_m = 1e+06 m" in _one_clear_line(capsys)
+    assert not out.exists()
+
+
+def test_the_scene_checks_auto_time_step_is_the_echo_modules():
+    import simcore
+    from simcore import echo, scene
+
+    for overrides in ({}, {"laser.pulse_width_s": 1e-10}, {"detector.bandwidth_hz": 1e9}):
+        s = simcore.with_overrides(simcore.load_scene(), overrides)
+        tau, b = s.laser.pulse_width_s, s.detector.bandwidth_hz
+        assert scene.auto_time_step_s(s) == echo.default_time_step_s(tau, b)

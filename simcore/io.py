@@ -25,21 +25,76 @@ _PLY_TYPES = {np.int32: "i4", np.float64: "f8", np.bool_: "u1"}
 
 @contextlib.contextmanager
 def atomic_path(path: str | Path):
-    """Yield a temporary path next to ``path``; rename it to ``path`` only if the block succeeds."""
+    """Yield a temporary path next to ``path``; rename it to ``path`` only if the block succeeds.
+
+    The temporary file is hidden (``.NAME.lmapd-PID-XXXX.part``); ``remove_stale_parts`` removes
+    those a killed process left (the ``lmapd`` commands call it on their output folders).
+    """
     path = Path(path)
     if not path.parent.exists():
         raise FileNotFoundError(f"output folder does not exist: {path.parent}")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
-    os.close(fd)
+    tmp = part_path(path)
     umask = os.umask(0)
     os.umask(umask)
     try:
-        yield Path(tmp)
+        yield tmp
         os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600; give the file the usual mode
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
+
+
+_PART_TAG = ".lmapd-"  # in the name of every temporary file: .NAME.lmapd-PID-XXXX.part[.SUFFIX]
+
+
+def part_path(path: str | Path) -> Path:
+    """Create an empty hidden temporary file next to ``path`` and return it; its name ends in
+    ``.part`` plus ``path``'s suffix (the writers choose the format by suffix)."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(
+        prefix=f".{path.name}{_PART_TAG}{os.getpid()}-",
+        suffix=f".part{path.suffix}",
+        dir=path.parent,
+    )
+    os.close(fd)
+    return Path(tmp)
+
+
+def remove_stale_parts(folder: str | Path) -> list[Path]:
+    """Remove the temporary files (``part_path``) in ``folder`` whose process is gone; the
+    removed paths. Files of running processes, and anything else, stay."""
+    removed = []
+    for p in Path(folder).glob(f".*{_PART_TAG}*-*.part*"):
+        pid_text = p.name.rpartition(_PART_TAG)[2].partition("-")[0]
+        if not pid_text.isdigit() or _process_alive(int(pid_text)):
+            continue
+        with contextlib.suppress(OSError):
+            p.unlink()
+            removed.append(p)
+    return removed
+
+
+def _process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):
+        return True  # another user's process, or not a pid: leave its file alone
+    return True
+
+
+def ply_comment(text: str) -> str:
+    """``text`` as one PLY header comment: printable ASCII; every other character (non-ASCII
+    letters, line breaks, tabs) written as its Python escape (``\\xe9``, ``\\u4e2d``, ``\\n``),
+    so that a scene or mesh name in any script, or with a newline, keeps the header one line per
+    comment. ASCII text is unchanged."""
+    if text.isascii() and text.isprintable():
+        return text
+    return "".join(
+        c if c.isascii() and c.isprintable() else c.encode("unicode_escape").decode() for c in text
+    )
 
 
 def write_ply(path: str | Path, cloud: PointCloud, comments: tuple[str, ...] = ()) -> None:
@@ -51,7 +106,8 @@ def write_ply(path: str | Path, cloud: PointCloud, comments: tuple[str, ...] = (
         data[axis] = cloud.points[:, i]
     for name, _ in ATTRIBUTES:
         data[name] = cloud.attributes[name]
-    ply = PlyData([PlyElement.describe(data, "vertex")], text=False, comments=list(comments))
+    header = [ply_comment(c) for c in comments]
+    ply = PlyData([PlyElement.describe(data, "vertex")], text=False, comments=header)
     with atomic_path(path) as tmp:
         ply.write(str(tmp))
 
@@ -222,7 +278,7 @@ def write_las(path: str | Path, cloud: PointCloud, comments: tuple[str, ...] = (
     header.generating_software = f"lmapd-sim {__version__}"[:32]
     header.global_encoding.wkt = True
     if comments:
-        text = "\n".join(comments).encode("utf-8")
+        text = "\n".join(ply_comment(c) for c in comments).encode("utf-8")  # one line each
         header.vlrs.append(laspy.VLR(_LAS_VLR_USER, _LAS_VLR_COMMENTS, "comments", text))
     las = laspy.LasData(header)
     las.x, las.y, las.z = (cloud.points[:, i] for i in range(3))

@@ -10,11 +10,12 @@ docs/physics.md#table-1).
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from .tomlfile import read_toml_file
 
 
 @dataclass(frozen=True)
@@ -97,13 +98,7 @@ def parameter_table(names) -> np.ndarray:
 
 def read_material_map(path: str | Path) -> dict[str, str]:
     """Read a material map TOML: a [materials] table of part name -> library material name."""
-    path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise FileNotFoundError(f"material map not found: {path}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ValueError(f"{path}: not valid TOML: {exc}") from None
+    data = read_toml_file(path, "material map", ValueError)
     table = data.get("materials", {})
     default = data.get("default", "coating_2")
     mapping = {str(k): str(v) for k, v in table.items()}

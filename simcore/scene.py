@@ -13,12 +13,15 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import math
+import os
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import tomli_w
+
+from .tomlfile import clip, read_toml_file
 
 ASSETS_DIR = Path(__file__).resolve().parent.parent / "assets"
 SCENES_DIR = ASSETS_DIR / "scenes"
@@ -44,15 +47,13 @@ class Laser:
     pulse_width_s: float = _f(
         5e-9, "s", 10e-12, 1e-6, "pulse width tau of Eq. 1 (the FWHM in our convention)"
     )
-    divergence_rad: float = _f(
-        2e-3, "rad", 0.0, 1.0, "laser full divergence before the expander", lo_open=True
-    )
+    divergence_rad: float = _f(2e-3, "rad", 1e-6, 1.0, "laser full divergence before the expander")
 
 
 @dataclass(frozen=True)
 class TransmitOptics:
     beam_expansion_ratio: float = _f(
-        1 / 15, "1", 0.0, 1000.0, "divergence ratio out/in (1/15 widens 2 -> 30 mrad)", lo_open=True
+        1 / 15, "1", 1e-3, 1000.0, "divergence ratio out/in (1/15 widens 2 -> 30 mrad)"
     )
     transmittance: float = _f(
         0.95, "1", 0.0, 1.0, "transmit optics transmittance eta_t", lo_open=True
@@ -167,7 +168,13 @@ class Pose:
 class Fidelity:
     subrays: int = _f(4, "1", 1, 1024, "sub-rays per pixel (a square number: 1, 4, 16, 64)")
     time_step_s: float = _f(
-        0.0, "s", 0.0, 1e-7, "waveform time step; 0 = auto min(tau/10, 1/(20 B))"
+        0.0,
+        "s",
+        0.0,
+        1e-7,
+        "waveform time step; 0 = auto min(tau/10, 1/(20 B)); else at least 10 ps and "
+        "tau/1000 (a pulse spans at most 1000 samples); with the montecarlo noise model the "
+        "range gate spans at most 65536 samples",
     )
     refine_subrays: int = _f(
         0, "1", 0, 1024, "sub-rays for mixed pixels (edges, depth steps); 0 = no refinement"
@@ -425,6 +432,43 @@ def _choices(meta) -> tuple:
     return tuple(choices()) if callable(choices) else choices
 
 
+MIN_TIME_STEP_S = 1e-11  # [s] the finest waveform time step (a 256 x 256 frame: ~3 s, ~0.6 GB)
+MAX_SAMPLES_PER_PULSE = 1000  # [-] pulse width / time step at most
+MAX_GATE_SAMPLES = 2**16  # [-] Monte Carlo samples per pixel over the gate (1 km at auto: 16k)
+SPEED_OF_LIGHT_M_S = 299_792_458.0  # [m/s] exact (SI)
+
+
+def auto_time_step_s(scene: Scene) -> float:
+    """The waveform time step of ``fidelity.time_step_s = 0``: min(tau / 10, 1 / (20 B)) [s]
+    (= ``echo.default_time_step_s``, which this module does not import: it loads no numpy)."""
+    return min(scene.laser.pulse_width_s / 10.0, 1.0 / (20.0 * scene.detector.bandwidth_hz))
+
+
+def _check_time_step(scene: Scene) -> None:
+    """fidelity.time_step_s is 0 (auto) or at least MIN_TIME_STEP_S and tau / 1000, and the
+    Monte Carlo model's waveform over the range gate has at most MAX_GATE_SAMPLES samples: no
+    value in range can make the echo windows exhaust memory or time."""
+    dt = scene.fidelity.time_step_s
+    tau = scene.laser.pulse_width_s
+    floor_s = max(MIN_TIME_STEP_S, tau / MAX_SAMPLES_PER_PULSE)
+    if 0.0 < dt < floor_s:
+        raise SceneError(
+            f"fidelity.time_step_s = {dt:g} s is too fine: give 0 (auto) or at least "
+            f"{floor_s:g} s (10 ps, and laser.pulse_width_s / {MAX_SAMPLES_PER_PULSE})"
+        )
+    if scene.fidelity.noise_model != "montecarlo":
+        return
+    step_s = dt or auto_time_step_s(scene)
+    samples = 2.0 * scene.timing.range_gate_m / SPEED_OF_LIGHT_M_S / step_s
+    if samples > MAX_GATE_SAMPLES:
+        raise SceneError(
+            f"timing.range_gate_m = {scene.timing.range_gate_m:g} m at a time step of "
+            f"{step_s:.3g} s is {samples:.3g} samples per pixel for fidelity.noise_model = "
+            f"montecarlo (at most {MAX_GATE_SAMPLES}): shorten the gate or give a coarser "
+            "fidelity.time_step_s"
+        )
+
+
 def validate(scene: Scene) -> None:
     """Check every value and the cross-field rules; raise SceneError naming the key."""
     _validate_fields(scene, "", names=("preset", "seed", "conventions", "paper_forms"))
@@ -449,6 +493,7 @@ def validate(scene: Scene) -> None:
             f"fidelity.subrays = {scene.fidelity.subrays} must be a square number "
             "(1, 4, 9, 16, ...)"
         )
+    _check_time_step(scene)
     a = scene.amplifiers
     if len(a.noise_factors) != len(a.power_gains):
         raise SceneError(
@@ -584,7 +629,7 @@ def parse_assignment(text: str) -> tuple[str, Any]:
     key = key.strip()
     try:
         value = tomllib.loads(f"v = {raw.strip()}")["v"]
-    except tomllib.TOMLDecodeError:
+    except (ValueError, RecursionError):  # not TOML (or a number of more than 4300 digits)
         value = raw.strip()
     return key, value
 
@@ -594,11 +639,14 @@ def builtin_scenes() -> list[str]:
 
 
 def read_toml(path: Path, error: type[SceneError] = SceneError) -> dict[str, Any]:
-    """The tables of a TOML file; ``error`` (a SceneError) names the file if it is not TOML."""
-    try:
-        return tomllib.loads(Path(path).read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise error(f"{path}: not valid TOML: {exc}") from None
+    """The tables of a TOML file; ``error`` (a SceneError) names the file if it is missing, not a
+    file, larger than ``tomlfile.MAX_TOML_BYTES`` or not TOML."""
+    return read_toml_file(path, "scene file", error)
+
+
+def _is_builtin(name: str) -> bool:
+    """Whether ``name`` is a built-in scene (``paper``); False for anything not a plain name."""
+    return name in builtin_scenes()
 
 
 def load_scene(source: str | Path | None = None) -> Scene:
@@ -606,11 +654,11 @@ def load_scene(source: str | Path | None = None) -> Scene:
     if source is None:
         source = "paper"
     path = Path(source)
-    if not path.suffix and (SCENES_DIR / f"{source}.toml").exists():
+    if not path.suffix and _is_builtin(str(source)):
         path = SCENES_DIR / f"{source}.toml"
-    if not path.exists():
+    if not os.path.lexists(path):  # never raises (a path too long for the system is not there)
         names = ", ".join(builtin_scenes())
-        raise SceneError(f"scene file not found: {source} (built-in scenes: {names})")
+        raise SceneError(f"scene file not found: {clip(source)} (built-in scenes: {names})")
     data = read_toml(path)
     data.setdefault("name", path.stem)
     scene = scene_from_dict(data)

@@ -23,7 +23,7 @@ import os
 import sys
 
 from . import app, bench, flyaround, keys, reproduce, simulate, sweep
-from .common import EXIT_USAGE, CliError, say
+from .common import EXIT_USAGE, CliError, one_line, say
 
 __all__ = ["EXIT_USAGE", "CliError", "build_parser", "main", "say"]
 
@@ -60,12 +60,17 @@ def main(argv: list[str] | None = None) -> int:
         return 130
     except Exception as exc:
         if isinstance(exc, _user_errors()):
-            print(f"lmapd: error: {exc}", file=sys.stderr)
+            print(f"lmapd: error: {one_line(str(exc))}", file=sys.stderr)
+            return EXIT_USAGE
+        if isinstance(exc, OSError) and exc.strerror:  # the system refused a file: name it
+            where = f"{exc.filename}: " if exc.filename is not None else ""
+            print(f"lmapd: error: {one_line(where + exc.strerror)}", file=sys.stderr)
             return EXIT_USAGE
         if os.environ.get("LMAPD_DEBUG"):  # a bug, not the user's input: one line, or the trace
             raise
         print(
-            f"lmapd: internal error: {type(exc).__name__}: {exc} (a bug: please report it; "
+            f"lmapd: internal error: {type(exc).__name__}: {one_line(str(exc))} (a bug: please "
+            "report it; "
             "LMAPD_DEBUG=1 shows the traceback)",
             file=sys.stderr,
         )

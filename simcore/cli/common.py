@@ -8,6 +8,9 @@ Light on purpose: the subcommand modules import this at ``lmapd --help`` time, s
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -49,13 +52,89 @@ def scene_from_args(args: argparse.Namespace):
 
 
 def check_output(path: str | None, suffixes, what: str) -> Path | None:
-    """``path`` as a Path if its suffix is one of ``suffixes`` and its folder exists (None if no
-    path was given); CliError naming the option ``what`` otherwise."""
+    """``path`` as a Path if its suffix is one of ``suffixes``, it is not a folder and its folder
+    is a folder (None if no path was given); CliError naming the option ``what`` otherwise."""
     if path is None:
         return None
+    from ..tomlfile import clip  # noqa: PLC0415
+
     p = Path(path)
+    shown = repr(clip(path))
     if p.suffix.lower() not in suffixes:
-        raise CliError(f"{what} {path!r}: unsupported format; use {' or '.join(suffixes)}")
-    if not p.parent.exists():
-        raise CliError(f"{what} {path!r}: folder {str(p.parent)!r} does not exist")
+        raise CliError(f"{what} {shown}: unsupported format; use {' or '.join(suffixes)}")
+    try:
+        if p.is_dir():
+            raise CliError(f"{what} {shown} is a folder; give a file name")
+        parent = p.parent
+        if not parent.exists():
+            raise CliError(f"{what} {shown}: folder {clip(str(parent))!r} does not exist")
+        if not parent.is_dir():
+            raise CliError(f"{what} {shown}: {clip(str(parent))!r} is a file, not a folder")
+    except OSError as exc:
+        raise CliError(f"{what} {shown}: unusable path ({exc.strerror})") from None
     return p
+
+
+@contextlib.contextmanager
+def staged_outputs(outputs: dict[str, Path | None]) -> Iterator[dict[str, Path]]:
+    """Write several output files all or none.
+
+    Before any work, a hidden temporary file is created next to each output (so an unwritable
+    place fails at once, naming its option); the block writes into those; on success each is
+    renamed onto its output, the last one last (the summary, which describes the others). On an
+    error nothing is left: no temporary file, no new output. Stale temporary files of killed runs
+    in those folders are removed first.
+
+    Parameters
+    ----------
+    outputs : dict
+        Option (``--out``) -> its output path, or None if the option was not given; in the order
+        of renaming.
+
+    Yields
+    ------
+    dict
+        Option -> the temporary path to write.
+    """
+    from .. import io  # noqa: PLC0415
+    from ..tomlfile import clip  # noqa: PLC0415
+
+    staged: dict[str, Path] = {}
+    targets = {k: v for k, v in outputs.items() if v is not None}
+    try:
+        for option, path in targets.items():
+            io.remove_stale_parts(path.parent)
+            if path.exists() and not os.access(path, os.W_OK):
+                raise CliError(f"{option} {clip(str(path))!r} is read-only")
+            try:
+                staged[option] = io.part_path(path)
+            except OSError as exc:
+                raise CliError(
+                    f"{option} {clip(str(path))!r}: cannot write there ({exc.strerror})"
+                ) from None
+        yield staged
+        done = []
+        try:
+            for option, tmp in staged.items():
+                os.replace(tmp, targets[option])
+                done.append(targets[option])
+        except OSError:
+            for path in done:  # none rather than a mix of new and old outputs
+                with contextlib.suppress(OSError):
+                    path.unlink()
+            raise
+    finally:
+        for tmp in staged.values():
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+
+
+def one_line(text: str) -> str:
+    """An error message as one line: control characters escaped, each run of more than
+    ``tomlfile.MAX_QUOTE_CHARS`` characters without a space clipped, the whole at most about
+    four times that."""
+    from ..tomlfile import MAX_QUOTE_CHARS, clip  # noqa: PLC0415
+
+    flat = "".join(c if c.isprintable() else c.encode("unicode_escape").decode() for c in text)
+    words = [clip(w) for w in flat.split(" ")]
+    return clip(" ".join(words), 4 * MAX_QUOTE_CHARS)

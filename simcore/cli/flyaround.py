@@ -168,6 +168,7 @@ def run_cli(args: argparse.Namespace) -> int:
     scene = with_overrides(load_scene(args.scene), overrides)
     out = Path(args.out)
     created = _make_folder(out, CliError)
+    io.remove_stale_parts(out)  # temporary files of a killed run in this folder
     try:
         result = run_flyaround(scene, times_s, j2=args.j2, out_dir=out, progress=True)
         io.write_json(out / JSON_NAME, result.to_json())

@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from .common import add_scene_argument, check_output, say, scene_from_args
+from .common import add_scene_argument, check_output, say, scene_from_args, staged_outputs
 
 
 def add_parser(subparsers: Any) -> argparse.ArgumentParser:
@@ -46,20 +46,22 @@ def run_cli(args: argparse.Namespace) -> int:
     from ..materials import MATERIAL_NAMES  # noqa: PLC0415  (the imaging chain: input checked)
     from ..pipeline import Pipeline  # noqa: PLC0415
 
-    result = Pipeline().run(scene)
-    summary = result.summary()
-    summary["material_names"] = list(MATERIAL_NAMES)
-    comments = (
-        "lmapd-sim point cloud, sensor frame (x right, y down, z boresight), metres",
-        f"scene {scene.name}",
-        f"target {result.target.name}; {result.target.credit}",
-        f"material_id indexes: {' '.join(MATERIAL_NAMES)}",
-    )
-    io.write_cloud(out, result.cloud, comments)
-    if summary_path:
-        io.write_json(summary_path, summary)
-    if wave_path:
-        io.write_waveforms(wave_path, result)
+    outputs = {"--out": out, "--waveforms": wave_path, "--summary": summary_path}
+    with staged_outputs(outputs) as staged:  # every place writable before any work; all or none
+        result = Pipeline().run(scene)
+        summary = result.summary()
+        summary["material_names"] = list(MATERIAL_NAMES)
+        comments = (
+            "lmapd-sim point cloud, sensor frame (x right, y down, z boresight), metres",
+            f"scene {scene.name}",
+            f"target {result.target.name}; {result.target.credit}",
+            f"material_id indexes: {' '.join(MATERIAL_NAMES)}",
+        )
+        io.write_cloud(staged["--out"], result.cloud, comments)
+        if "--waveforms" in staged:
+            io.write_waveforms(staged["--waveforms"], result)
+        if "--summary" in staged:
+            io.write_json(staged["--summary"], summary)
     total_ms = 1e3 * sum(result.timings_s.values())
     say(
         f"{summary['n_points']} points ({summary['n_outliers']} outliers, "

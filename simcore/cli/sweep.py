@@ -59,6 +59,12 @@ def run_cli(args: argparse.Namespace) -> int:
     if out.exists() and not out.is_dir():
         raise CliError(f"--out {args.out!r} is a file, not a folder")
     sweep = load_sweep(args.sweep)
+    from .. import io  # noqa: PLC0415
+    from ..sweep.spec import CLOUDS_DIR, FRAMES_DIR  # noqa: PLC0415
+
+    for folder in (out, out / FRAMES_DIR, out / CLOUDS_DIR):  # a killed run's temporary files
+        if folder.is_dir():
+            io.remove_stale_parts(folder)
     clouds = None if args.clouds is None else (False if args.clouds == "none" else args.clouds)
     report = run_sweep(
         sweep, out, workers=args.workers, scheduler=args.scheduler, clouds=clouds, progress=True

@@ -74,6 +74,9 @@ def run_cli(args: argparse.Namespace) -> int:
         raise CliError(f"--out {str(out)!r}: cannot create the folder ({exc.strerror})") from None
     if not os.access(out, os.W_OK | os.X_OK):
         raise CliError(f"--out {str(out)!r}: the folder is not writable")
+    from ... import io  # noqa: PLC0415
+
+    io.remove_stale_parts(out)  # temporary files of a killed run in this folder
     report = run_reproduction(out, quick=args.quick, seed=args.seed, progress=True)
     say(
         f"{len(report['items'])} items, {len(report['figures'])} figures and {REPORT_NAME} "

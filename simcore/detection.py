@@ -46,7 +46,7 @@ def false_alarms_per_pixel_paper(tnr: float, gate_m: float, df_hz: float) -> flo
     return 2.2 * (2.0 * gate_m / C) * df_hz * 0.5 * special.erfc(tnr / np.sqrt(2.0))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Outliers:
     """False-alarm points: pixel (flat index) and range of each [m]."""
 
@@ -67,4 +67,4 @@ def draw_outliers(
     pixel = rng.integers(0, n_pixels_total, size=n_out)
     lo = max(0.0, gate_center_m - gate_m / 2.0)
     hi = gate_center_m + gate_m / 2.0
-    return Outliers(pixel.astype(np.int64), rng.uniform(lo, hi, size=n_out))
+    return Outliers(pixel=pixel.astype(np.int64), range_m=rng.uniform(lo, hi, size=n_out))

@@ -78,7 +78,7 @@ def front_view_rotation(extents) -> np.ndarray:
     return rot
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class PoseInSensor:
     """Where the target is: p_sensor = rotation @ p_target + translation_m."""
 
@@ -104,7 +104,10 @@ def target_pose(pose: Pose, extents, body_from_mesh=None) -> PoseInSensor:
             @ rotation_y(np.radians(pose.azimuth_deg))
             @ front_view_rotation(extents)
         )
-    return PoseInSensor(rot, np.array([pose.offset_x_m, pose.offset_y_m, pose.distance_m]))
+    return PoseInSensor(
+        rotation=rot,
+        translation_m=np.array([pose.offset_x_m, pose.offset_y_m, pose.distance_m]),
+    )
 
 
 # ----------------------------------------------------------------------------------------------
@@ -151,7 +154,7 @@ def unit_directions(tx, ty) -> np.ndarray:
     return d
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class RayGrid:
     """The array's rays in the sensor frame.
 
@@ -184,7 +187,14 @@ def ray_grid(pixels: int, fov_rad: float, subrays: int) -> RayGrid:
     centre = subray_directions(pixels, fov_rad, 1)[:, 0]
     for a in (dirs, centre):
         a.setflags(write=False)
-    return RayGrid(pixels, dirs.shape[1], fov_rad / pixels, dirs, centre, fov_rad)
+    return RayGrid(
+        pixels=pixels,
+        subrays=dirs.shape[1],
+        ifov_rad=fov_rad / pixels,
+        directions=dirs,
+        pixel_directions=centre,
+        fov_rad=fov_rad,
+    )
 
 
 # ----------------------------------------------------------------------------------------------
@@ -244,7 +254,7 @@ class RayCaster:
         return np.take(self._normals, face, axis=0)  # (faster than fancy indexing rows)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class HitBlock:
     """First hits of K sub-rays in each of n pixels.
 
@@ -275,12 +285,12 @@ class HitBlock:
 
     def take(self, rows) -> HitBlock:
         """The block of some of its pixels (an index or a boolean mask)."""
-        fields = (self.pixel, self.directions, self.range_m, self.cos_theta, self.face)
+        per_subray = ("pixel", "directions", "range_m", "cos_theta", "face", "depth_m")
         spread = self.spread_m[rows] if self.spread_m is not None else None
-        return HitBlock(*(x[rows] for x in fields), self.depth_m[rows], spread)
+        return HitBlock(**{name: getattr(self, name)[rows] for name in per_subray}, spread_m=spread)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Hits:
     """First hits of the whole array: the base sampling of every pixel and, if adaptive
     refinement is on, a denser sampling of the mixed pixels that replaces theirs.
@@ -362,12 +372,12 @@ def cast_block(caster: RayCaster, pixel, directions, pose: PoseInSensor) -> HitB
     depth = np.where(hit, range_m * dirs_s[:, 2], np.inf)
     shape = directions.shape[:2]
     return HitBlock(
-        np.asarray(pixel, dtype=np.int64),
-        directions,
-        range_m.reshape(shape),
-        cos_t.reshape(shape),
-        face.reshape(shape),
-        depth.reshape(shape),
+        pixel=np.asarray(pixel, dtype=np.int64),
+        directions=directions,
+        range_m=range_m.reshape(shape),
+        cos_theta=cos_t.reshape(shape),
+        face=face.reshape(shape),
+        depth_m=depth.reshape(shape),
     )
 
 
@@ -378,7 +388,7 @@ def corner_directions(pixels: int, fov_rad: float) -> np.ndarray:
     return unit_directions(g[None, :], g[:, None]).reshape(-1, 3)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class CornerSamples:
     """First hits of the rays through the pixel corners, each (pixels + 1, pixels + 1)."""
 
@@ -539,7 +549,9 @@ def probe(caster: RayCaster, rays: RayGrid, pose: PoseInSensor) -> CornerSamples
     cos_t = incidence_cos(caster, face, dirs_t)
     part = np.where(hit, caster.model.face_part[np.maximum(face, 0)], -1)
     n1 = rays.pixels + 1
-    return CornerSamples(range_m.reshape(n1, n1), part.reshape(n1, n1), cos_t.reshape(n1, n1))
+    return CornerSamples(
+        range_m=range_m.reshape(n1, n1), part=part.reshape(n1, n1), cos_theta=cos_t.reshape(n1, n1)
+    )
 
 
 def cast(
@@ -575,7 +587,7 @@ def cast(
         refined = cast_block(caster, which, dirs, pose)
     if cell_spread:
         base = dataclasses.replace(base, spread_m=cell_spread_m(base, corners))
-    return Hits(base, refined, pose)
+    return Hits(base=base, refined=refined, pose=pose)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -117,7 +117,7 @@ def read_ply(path: str | Path) -> PointCloud:
     vertex = PlyData.read(str(path))["vertex"].data
     points = np.stack([vertex[a].astype(np.float64) for a in "xyz"], axis=1)
     attrs = {name: vertex[name].astype(t) for name, t in ATTRIBUTES}
-    return PointCloud(points, attrs)
+    return PointCloud(points=points, attributes=attrs)
 
 
 def _jsonable(obj):
@@ -313,7 +313,7 @@ def read_las(path: str | Path) -> PointCloud:
         raise ValueError(f"{path}: not an lmapd-sim LAS, no dimension {', '.join(missing)}")
     points = np.stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)], axis=1)
     attrs = {n: np.asarray(las[n]).astype(t) for n, t in ATTRIBUTES}
-    return PointCloud(points.astype(np.float64), attrs)
+    return PointCloud(points=points.astype(np.float64), attributes=attrs)
 
 
 # ----------------------------------------------------------------------------------------------

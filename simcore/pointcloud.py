@@ -30,7 +30,7 @@ ATTRIBUTES = (
 )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class PointCloud:
     """points : (n, 3) float64 [m], sensor frame; attributes : name -> (n,) array (ATTRIBUTES)."""
 
@@ -73,7 +73,7 @@ def assemble_cloud(
         "facet_id": np.concatenate([facet_id, np.full(n_o, -1)]).astype(np.int32),
         "is_outlier": np.concatenate([np.zeros(n_t, bool), np.ones(n_o, bool)]),
     }
-    return PointCloud(points, attrs)
+    return PointCloud(points=points, attributes=attrs)
 
 
 def stage_cloud(

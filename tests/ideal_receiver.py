@@ -34,7 +34,7 @@ def detect(scene, echo, response: receivers.Response) -> receivers.Detection:
         range_m=np.where(detected, r_true_m, np.nan),
         threshold_w=THRESHOLD_W,
         n_false_per_pixel=0.0,
-        outliers=Outliers(np.zeros(0, np.int64), np.zeros(0)),
+        outliers=Outliers(pixel=np.zeros(0, np.int64), range_m=np.zeros(0)),
     )
 
 

@@ -45,7 +45,7 @@ def far_cloud(distance_m: float, n: int = 500, seed: int = 7) -> PointCloud:
         "facet_id": np.where(outlier, -1, rng.integers(0, 10**6, n)).astype(np.int32),
         "is_outlier": outlier,
     }
-    return PointCloud(points, attrs)
+    return PointCloud(points=points, attributes=attrs)
 
 
 def test_ply_reads_back_equal_with_its_comments(tmp_path, result):
@@ -90,7 +90,7 @@ def test_a_cloud_beyond_the_int32_reach_gets_a_coarser_power_of_ten(tmp_path):
     cloud = far_cloud(0.0, n=20)
     points = cloud.points.copy()
     points[0, 2], points[1, 2] = -300e3, 300e3  # 300 km from the centre: 0.1 mm cannot reach
-    cloud = PointCloud(points, cloud.attributes)
+    cloud = PointCloud(points=points, attributes=cloud.attributes)
     io.write_las(tmp_path / "wide.las", cloud)
     scale = laspy.read(str(tmp_path / "wide.las")).header.scales[0]
     assert scale == pytest.approx(1e-3)
@@ -127,7 +127,8 @@ def test_las_classes_outliers_as_noise_and_target_points_as_class_1(tmp_path):
 
 def test_an_empty_cloud_round_trips(tmp_path):
     empty = PointCloud(
-        np.zeros((0, 3)), {name: np.zeros(0, dtype=dtype) for name, dtype in ATTRIBUTES}
+        points=np.zeros((0, 3)),
+        attributes={name: np.zeros(0, dtype=dtype) for name, dtype in ATTRIBUTES},
     )
     for suffix in io.CLOUD_SUFFIXES:
         io.write_cloud(tmp_path / f"e{suffix}", empty)

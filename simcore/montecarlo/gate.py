@@ -64,7 +64,7 @@ class McResult:
     @property
     def outliers(self) -> Outliers:
         """The false alarms as detection.Outliers (pixel, range), for the point cloud."""
-        return Outliers(self.false_alarm_pixel, self.false_alarm_range_m)
+        return Outliers(pixel=self.false_alarm_pixel, range_m=self.false_alarm_range_m)
 
     @property
     def n_false_alarms(self) -> int:

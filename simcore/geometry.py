@@ -26,13 +26,12 @@ except ImportError as exc:  # pragma: no cover - depends on the installation
     ) from exc
 
 from . import parallel, timing
+from .constants import C
 from .illumination import illumination_gain
 from .pulse import scene_pulse_shape
 from .scene import Pose, Scene
 from .stage import Stage, readonly
 from .target import TargetModel, load_target, source_stamp
-
-C = 299_792_458.0  # speed of light [m/s] (exact)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -9,6 +9,8 @@ mesh file (vertices, triangles, part of each triangle) is cached on disk, keyed 
 the file's content: ``$LMAPD_CACHE_DIR`` (``off`` disables it), else ``$XDG_CACHE_HOME/lmapd-sim``,
 else ``~/.cache/lmapd-sim``. Entries are written atomically; a stale one is never read (another
 content, another key), a corrupt one is rebuilt and an unwritable folder skipped, with a warning.
+trimesh is imported only to read a mesh file (or for ``TargetModel.mesh``): a cached target is
+centred, scaled and given its normals with numpy alone, bit for bit as trimesh would.
 """
 
 from __future__ import annotations
@@ -52,7 +54,7 @@ def _transformed_points(points: np.ndarray, matrix: np.ndarray) -> np.ndarray:
     """(n, 3) ``points`` through the homogeneous (4, 4) ``matrix``, as trimesh's
     ``apply_transform`` computes them (the same products in the same order, so the vertices are
     bit for bit those of a target transformed by trimesh); a matrix within 1e-8 of the identity
-    leaves them as they are, as there."""
+    leaves them unchanged, as it does there."""
     offset = matrix - _IDENTITY4
     if float(np.ptp(offset)) < 1e-8 or np.abs(offset).max() < 1e-8:
         return points.copy()

@@ -8,10 +8,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import constants as sc
 from scipy import special
 
-C = sc.c  # speed of light [m/s]
+from .constants import C
 
 
 def detection_probability(i_pk_a, threshold_a: float, sigma_pk_a):

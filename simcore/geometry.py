@@ -26,13 +26,12 @@ except ImportError as exc:  # pragma: no cover - depends on the installation
     ) from exc
 
 from . import parallel, timing
+from .constants import C
 from .illumination import illumination_gain
 from .pulse import scene_pulse_shape
 from .scene import Pose, Scene
 from .stage import Stage, readonly
 from .target import TargetModel, load_target, source_stamp
-
-C = 299_792_458.0  # speed of light [m/s] (exact)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -206,8 +205,11 @@ class RayCaster:
     def __init__(self, model: TargetModel):
         self.model = model
         self._scene = rtcore_scene.EmbreeScene()
-        TriangleMesh(self._scene, model.mesh.triangles.astype(np.float32))
-        self._normals = np.asarray(model.mesh.face_normals, dtype=np.float64)
+        # shared vertices and an index buffer, as float64: embreex copies its input element by
+        # element in Python, and this takes 0.2 s for the MRO where three float32 vertices per
+        # triangle took 0.34 s (the same float32 triangles: the same BVH and hits)
+        TriangleMesh(self._scene, model.vertices_m, model.faces)
+        self._normals = model.face_normals
         self._radius = model.radius_m
         # the BVH is built lazily by the first query: build it now so its cost is paid here
         self._scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), output=1)
@@ -622,7 +624,7 @@ def beam_edge(pixels: int, fov_rad: float, theta_ill_rad: float, model: str) -> 
 
 def stage_hits(scene: Scene, tgt: TargetStage, rays: RayGrid) -> Hits:
     """First hits of every sub-ray, the mixed pixels re-cast densely when the scene refines."""
-    pose = target_pose(scene.pose, tgt.model.mesh.extents, tgt.model.body_from_mesh)
+    pose = target_pose(scene.pose, tgt.model.extents_m, tgt.model.body_from_mesh)
     fid = scene.fidelity
     lit_edge, steep_m = None, np.inf  # what refinement needs besides the mixed pixels
     if fid.refine_subrays > rays.subrays:

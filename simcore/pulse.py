@@ -10,12 +10,20 @@ The model: docs/physics.md#pulse, docs/physics.md#band-limit, docs/physics.md#em
 
 from __future__ import annotations
 
+import hashlib
+import json
+import math
+import warnings
 from dataclasses import dataclass
 from functools import cached_property, lru_cache
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy import optimize, special
+import scipy
+from scipy import special
+
+from .cache import cache_dir, write_atomically
 
 if TYPE_CHECKING:
     from .scene import Scene
@@ -23,6 +31,7 @@ if TYPE_CHECKING:
 A_FWHM = 2.446386  # Eq. 1 constant for which tau is the FWHM (ours)
 A_PAPER = 3.5  # Eq. 1 constant printed in the paper (FWHM = 0.699 tau)
 _TABLE_SIZE = 1 << 15
+MARKS_MAX_ENTRIES = 256  # pulses whose timing marks the on-disk cache keeps
 
 
 def pulse_power_w(t_s, energy_j: float, tau_s: float, a: float = A_FWHM):
@@ -130,26 +139,93 @@ class PulseShape:
 def pulse_shape(tau_s: float, a: float, bandwidth_hz: float) -> PulseShape:
     """Tabulate P0 and h_B * P0 (per joule) and find the reference pulse's timing marks."""
     sigma = band_limit_sigma_s(bandwidth_hz)
-    lam = a / tau_s
-    t0 = -9.0 * sigma
-    t1 = 30.0 / lam + 9.0 * sigma  # x e^(1-x) < 1e-11 beyond x = 30
-    t = np.linspace(t0, t1, _TABLE_SIZE)
+    t = table_times_s(tau_s, a, sigma)
     filt = filtered_pulse_w(t, 1.0, tau_s, a, sigma)
     raw = pulse_power_w(t, 1.0, tau_s, a)
-    i_pk = int(np.argmax(filt))
-    f = lambda x: -filtered_pulse_w(np.array([x]), 1.0, tau_s, a, sigma)[0]  # noqa: E731
-    res = optimize.minimize_scalar(f, bracket=(t[i_pk - 1], t[i_pk], t[i_pk + 1]), tol=1e-12)
-    t_pk, peak = float(res.x), float(-res.fun)
-    half = lambda x: filtered_pulse_w(np.array([x]), 1.0, tau_s, a, sigma)[0] - 0.5 * peak  # noqa: E731
-    t_half = optimize.brentq(half, t0, t_pk, xtol=1e-16, rtol=1e-14)
+    t_pk, peak, t_half = cached_timing_marks(
+        (tau_s, a, bandwidth_hz), lambda: timing_marks(t, filt, tau_s, a, sigma)
+    )
     start = t[np.argmax(filt > 1e-5 * peak)]
     end = t[len(t) - 1 - np.argmax(filt[::-1] > 1e-4 * peak)]
     slopes = [np.diff(arr, append=arr[-1]) for arr in (filt, raw)]
     for arr in (filt, raw, *slopes):
         arr.setflags(write=False)
-    return PulseShape(
-        tau_s, a, sigma, t0, float(t[1] - t[0]), filt, raw, t_half, t_pk, peak, start, end, *slopes
-    )
+    t0, step = float(t[0]), float(t[1] - t[0])
+    return PulseShape(tau_s, a, sigma, t0, step, filt, raw, t_half, t_pk, peak, start, end, *slopes)
+
+
+def table_times_s(tau_s: float, a: float, sigma_s: float) -> np.ndarray:
+    """(N,) times of the pulse tables [s]: from 9 sigma_h before the pulse starts to where Eq. 1
+    has fallen below 1e-11 of its peak (x e^(1-x) at x = 30), plus 9 sigma_h."""
+    t0 = -9.0 * sigma_s
+    t1 = 30.0 / (a / tau_s) + 9.0 * sigma_s
+    return np.linspace(t0, t1, _TABLE_SIZE)
+
+
+def timing_marks(t_s, filtered, tau_s: float, a: float, sigma_s: float) -> tuple[float, ...]:
+    """Peak time [s], peak [W/J] and rising half-maximum time [s] of the band-limited pulse, from
+    its table (``t_s``, ``filtered``: (N,)) refined on the closed form with scipy.optimize."""
+    from scipy import optimize  # noqa: PLC0415  (0.3 s to import: only for a pulse not cached)
+
+    i_pk = int(np.argmax(filtered))
+    f = lambda x: -filtered_pulse_w(np.array([x]), 1.0, tau_s, a, sigma_s)[0]  # noqa: E731
+    bracket = (t_s[i_pk - 1], t_s[i_pk], t_s[i_pk + 1])
+    res = optimize.minimize_scalar(f, bracket=bracket, tol=1e-12)
+    t_pk, peak = float(res.x), float(-res.fun)
+    half = lambda x: filtered_pulse_w(np.array([x]), 1.0, tau_s, a, sigma_s)[0] - 0.5 * peak  # noqa: E731
+    t_half = optimize.brentq(half, t_s[0], t_pk, xtol=1e-16, rtol=1e-14)
+    return t_pk, peak, float(t_half)
+
+
+_MARKS = ("t_peak_s", "peak_w_per_j", "t_half_s")
+
+
+def _marks_file(folder: Path, pulse: tuple[float, ...]) -> Path:
+    """The cache entry of a pulse's marks: named by the pulse (tau, a, bandwidth, exactly), this
+    module's source and the numpy and scipy that computed them."""
+    digest = hashlib.sha256(Path(__file__).read_bytes())
+    versions = f"numpy {np.__version__} scipy {scipy.__version__}"
+    digest.update(f"{' '.join(float(v).hex() for v in pulse)} {versions}".encode())
+    return folder / "pulses" / f"{digest.hexdigest()}.json"
+
+
+def _read_marks(file: Path) -> tuple[float, ...] | None:
+    """The marks stored in ``file`` (exact: hexadecimal floats); None if there are none, with a
+    warning if the entry is corrupt."""
+    try:
+        stored = json.loads(file.read_text(encoding="ascii"))
+        marks = tuple(float.fromhex(stored[name]) for name in _MARKS)
+        t_pk, peak, t_half = marks
+        if not (all(map(math.isfinite, marks)) and peak > 0 and t_half < t_pk):
+            raise ValueError("inconsistent marks")
+        return marks
+    except (FileNotFoundError, NotADirectoryError):
+        return None
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+        warnings.warn(f"pulse cache {file} is corrupt ({exc}); rebuilt", stacklevel=4)
+        return None
+
+
+def cached_timing_marks(pulse: tuple[float, ...], compute) -> tuple[float, ...]:
+    """``compute()`` (the timing marks of ``pulse``), kept in the on-disk cache: finding them
+    needs scipy.optimize, whose import costs several times the search (a corrupt entry is
+    rebuilt, an unwritable cache skipped, each with a warning)."""
+    folder = cache_dir()
+    try:
+        file = _marks_file(folder, pulse) if folder is not None else None
+    except OSError:  # this module's source is not readable: no cache
+        file = None
+    marks = _read_marks(file) if file is not None else None
+    if marks is not None:
+        return marks
+    marks = compute()
+    if file is not None:
+        text = json.dumps({name: float(v).hex() for name, v in zip(_MARKS, marks, strict=True)})
+        try:
+            write_atomically(file, lambda fh: fh.write(text.encode("ascii")), MARKS_MAX_ENTRIES)
+        except OSError as exc:
+            warnings.warn(f"pulse cache {file.parent} is not writable ({exc})", stacklevel=3)
+    return marks
 
 
 def default_time_step_s(tau_s: float, bandwidth_hz: float) -> float:

@@ -11,14 +11,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import constants as sc
 
+from .constants import K_B, Q_E, C, H
 from .scene import Amplifiers, Detector, SceneError
-
-Q_E = sc.e  # elementary charge [C] (exact, SI 2019)
-H = sc.h  # Planck constant [J s] (exact)
-C = sc.c  # speed of light [m/s] (exact)
-K_B = sc.k  # Boltzmann constant [J/K] (exact)
 
 PAPER_QUANTUM_EFFICIENCY = 0.6  # the paper's "about 0.6 for Si"
 MAX_GAIN = 1e6  # refused above: far beyond any linear-mode APD (Si 20-400, Table 2)

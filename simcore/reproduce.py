@@ -18,10 +18,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import constants as sc
 from scipy import signal
 
 from . import echo, orbit, timing
+from .constants import C
 from .materials import MATERIAL_NAMES
 from .pipeline import Result
 
@@ -38,7 +38,6 @@ __all__ = [
     "settings_for",
 ]
 
-C = sc.c  # speed of light [m/s] (exact)
 PAPER = (
     "Wang, Quan, Zhang, Liu, Cong, Sun, Li, Wang, Analysis and Simulation of Space-Based LM-APD 3D "
     "Imaging, Electronics 2023, 12(10), 2261, doi:10.3390/electronics12102261"

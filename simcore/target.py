@@ -9,24 +9,30 @@ mesh file (vertices, triangles, part of each triangle) is cached on disk, keyed 
 the file's content: ``$LMAPD_CACHE_DIR`` (``off`` disables it), else ``$XDG_CACHE_HOME/lmapd-sim``,
 else ``~/.cache/lmapd-sim``. Entries are written atomically; a stale one is never read (another
 content, another key), a corrupt one is rebuilt and an unwritable folder skipped, with a warning.
+trimesh is imported only to read a mesh file (or for ``TargetModel.mesh``): a cached target is
+centred, scaled and given its normals with numpy alone, bit for bit as trimesh would.
 """
 
 from __future__ import annotations
 
 import hashlib
-import os
-import tempfile
+import importlib.metadata
 import tomllib
 import warnings
 import zipfile
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import trimesh
 
+from .cache import CACHE_ENV, cache_dir, write_atomically
 from .materials import LIBRARY, read_material_map
 from .scene import ASSETS_DIR, MESH_SUFFIXES, Target
+
+if TYPE_CHECKING:  # trimesh loads when a mesh file is read or ``TargetModel.mesh`` is asked for
+    import trimesh
 
 TARGETS_DIR = ASSETS_DIR / "targets"
 MAX_FACES = 5_000_000
@@ -40,14 +46,103 @@ class TargetError(ValueError):
     """A mesh file is missing, unreadable or degenerate. The message names the file."""
 
 
+_IDENTITY4 = np.eye(4)
+_NORMAL_MIN = float(np.finfo(np.float64).resolution * 100)  # shorter cross products: no normal
+
+
+def _transformed_points(points: np.ndarray, matrix: np.ndarray) -> np.ndarray:
+    """(n, 3) ``points`` through the homogeneous (4, 4) ``matrix``, as trimesh's
+    ``apply_transform`` computes them (the same products in the same order, so the vertices are
+    bit for bit those of a target transformed by trimesh); a matrix within 1e-8 of the identity
+    leaves them unchanged, as it does there."""
+    offset = matrix - _IDENTITY4
+    if float(np.ptp(offset)) < 1e-8 or np.abs(offset).max() < 1e-8:
+        return points.copy()
+    stack = np.column_stack((points, np.ones(len(points))))
+    return np.ascontiguousarray(np.dot(matrix, stack.T).T[:, :3])
+
+
+def _edge_crosses(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(n_faces, 3) cross product (v1 - v0) x (v2 - v1) of each triangle's edges: trimesh's
+    (and numpy.cross's) products and differences, on one coordinate at a time (4x faster)."""
+    corners = np.ascontiguousarray(faces.T)
+    (x0, x1, x2), (y0, y1, y2), (z0, z1, z2) = (c[corners] for c in vertices.T)
+    ax, ay, az = x1 - x0, y1 - y0, z1 - z0
+    bx, by, bz = x2 - x1, y2 - y1, z2 - z1
+    crosses = np.empty((len(faces), 3))
+    np.subtract(ay * bz, az * by, out=crosses[:, 0])
+    np.subtract(az * bx, ax * bz, out=crosses[:, 1])
+    np.subtract(ax * by, ay * bx, out=crosses[:, 2])
+    return crosses
+
+
+def _area(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """Total area of the triangles [units^2] (trimesh's ``Trimesh.area``, bit for bit)."""
+    crosses = _edge_crosses(vertices, faces)
+    return float((np.sqrt((crosses**2).sum(axis=1)) / 2.0).sum())
+
+
+def _bounds(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(2, 3) lowest and highest coordinates of the vertices the faces use."""
+    used = np.zeros(len(vertices), dtype=bool)
+    used[faces] = True
+    coordinates = np.ascontiguousarray(vertices[used].T)
+    return np.array([coordinates.min(axis=1), coordinates.max(axis=1)])
+
+
+@dataclass(frozen=True, eq=False)
+class TargetMesh:
+    """A target's triangles in metres, in the target frame (origin at the bounding-box centre).
+
+    What the ray caster and the app read is derived from the arrays on first use and kept, with
+    trimesh's arithmetic (bit for bit what a ``trimesh.Trimesh`` of them gives); trimesh itself
+    is imported only for :attr:`as_trimesh`.
+
+    Attributes
+    ----------
+    vertices_m : (n_vertices, 3) float64 -- positions [m], read-only
+    faces : (n_faces, 3) int64 -- vertex indices of each triangle, read-only
+    """
+
+    vertices_m: np.ndarray
+    faces: np.ndarray
+
+    @cached_property
+    def face_normals(self) -> np.ndarray:
+        """(n_faces, 3) float64 unit normal of each triangle (right-handed in its vertex order;
+        zero for a triangle without area), read-only."""
+        crosses = _edge_crosses(self.vertices_m, self.faces)
+        norm = np.sqrt(np.dot(crosses * crosses, [1.0] * 3))
+        valid = norm > _NORMAL_MIN
+        norm[valid] **= -1
+        normals = np.where(valid[:, None], crosses * norm.reshape((-1, 1)), 0.0)
+        normals.setflags(write=False)
+        return normals
+
+    @cached_property
+    def extents_m(self) -> np.ndarray:
+        """(3,) size of the axis-aligned bounding box of the faces [m]."""
+        return np.ptp(_bounds(self.vertices_m, self.faces), axis=0)
+
+    @cached_property
+    def as_trimesh(self) -> trimesh.Trimesh:
+        """The mesh as a ``trimesh.Trimesh`` (of copies of the arrays), made on first use."""
+        import trimesh  # noqa: PLC0415  (a third of a second to import: only when asked for)
+
+        return trimesh.Trimesh(
+            self.vertices_m.copy(), self.faces.copy(), process=False, validate=False
+        )
+
+
 @dataclass(frozen=True)
 class TargetModel:
     """A target mesh ready for ray casting.
 
     Attributes
     ----------
-    mesh : trimesh.Trimesh
-        Vertices in metres, target frame (origin at the bounding-box centre).
+    surface : TargetMesh
+        Triangles in metres, target frame (origin at the bounding-box centre); shared by the
+        copies :func:`with_materials` makes, with what was derived from it.
     face_part : (n_faces,) int32
         Index into ``part_names`` for each face.
     part_names : tuple of str
@@ -58,7 +153,7 @@ class TargetModel:
         Display name and the credit line to show wherever the model is shown.
     """
 
-    mesh: trimesh.Trimesh
+    surface: TargetMesh
     face_part: np.ndarray
     part_names: tuple[str, ...]
     part_materials: tuple[str, ...]
@@ -66,6 +161,31 @@ class TargetModel:
     credit: str
     source: str
     body_from_mesh: np.ndarray  # (3, 3) rotation: p_body = body_from_mesh @ p_mesh
+
+    @property
+    def vertices_m(self) -> np.ndarray:
+        """(n_vertices, 3) float64 vertex positions [m], target frame."""
+        return self.surface.vertices_m
+
+    @property
+    def faces(self) -> np.ndarray:
+        """(n_faces, 3) int64 vertex indices of each triangle."""
+        return self.surface.faces
+
+    @property
+    def face_normals(self) -> np.ndarray:
+        """(n_faces, 3) float64 unit normal of each triangle, target frame."""
+        return self.surface.face_normals
+
+    @property
+    def extents_m(self) -> np.ndarray:
+        """(3,) size of the target's axis-aligned bounding box [m]."""
+        return self.surface.extents_m
+
+    @property
+    def mesh(self) -> trimesh.Trimesh:
+        """The target as a ``trimesh.Trimesh`` (imports trimesh on first use)."""
+        return self.surface.as_trimesh
 
     @property
     def face_material(self) -> np.ndarray:
@@ -89,7 +209,7 @@ class TargetModel:
     @property
     def radius_m(self) -> float:
         """Radius of the bounding sphere about the target origin [m]."""
-        return float(np.linalg.norm(self.mesh.vertices, axis=1).max())
+        return float(np.linalg.norm(self.vertices_m, axis=1).max())
 
 
 def builtin_targets() -> list[str]:
@@ -133,22 +253,13 @@ class MeshGeometry:
 
 
 CACHE_FORMAT = 1  # bump when MeshGeometry or the way it is read from a file changes
-CACHE_ENV = "LMAPD_CACHE_DIR"
 CACHE_MAX_ENTRIES = 32  # the least recently written entries beyond this are removed
-
-
-def cache_dir() -> Path | None:
-    """The folder of the on-disk target cache, None when ``$LMAPD_CACHE_DIR`` is ``off``."""
-    chosen = os.environ.get(CACHE_ENV)
-    if chosen is not None:
-        return None if chosen.strip().lower() in ("", "off", "0", "none") else Path(chosen)
-    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
-    return Path(base) / "lmapd-sim"
 
 
 def _cache_file(folder: Path, content: bytes) -> Path:
     digest = hashlib.sha256(content)
-    digest.update(f"format {CACHE_FORMAT} trimesh {trimesh.__version__}".encode())
+    reader = importlib.metadata.version("trimesh")  # (without importing it)
+    digest.update(f"format {CACHE_FORMAT} trimesh {reader}".encode())
     return folder / "targets" / f"{digest.hexdigest()}.npz"
 
 
@@ -181,37 +292,25 @@ def _read_cached(file: Path) -> MeshGeometry | None:
 
 
 def _write_cached(file: Path, geometry: MeshGeometry) -> None:
-    """Write ``geometry`` to ``file`` atomically (a temporary file renamed over it: a reader sees
-    the old entry, the new one, or none); an unwritable cache only warns."""
-    tmp = None
+    """Write ``geometry`` to ``file`` atomically; an unwritable cache only warns."""
+
+    def write(fh) -> None:
+        np.savez(
+            fh,
+            vertices=geometry.vertices,
+            faces=geometry.faces,
+            face_part=geometry.face_part,
+            part_names=np.array(geometry.part_names, dtype=str),
+        )
+
     try:
-        file.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=file.parent, suffix=".part", delete=False) as fh:
-            tmp = Path(fh.name)
-            np.savez(
-                fh,
-                vertices=geometry.vertices,
-                faces=geometry.faces,
-                face_part=geometry.face_part,
-                part_names=np.array(geometry.part_names, dtype=str),
-            )
-        os.replace(tmp, file)
-        _prune(file.parent)
+        write_atomically(file, write, CACHE_MAX_ENTRIES)
     except OSError as exc:
-        if tmp is not None:
-            tmp.unlink(missing_ok=True)
         warnings.warn(
             f"target cache {file.parent} is not writable ({exc}); the mesh is read from its "
             f"file each time (set {CACHE_ENV} to another folder, or to off)",
             stacklevel=3,
         )
-
-
-def _prune(folder: Path) -> None:
-    """Keep the CACHE_MAX_ENTRIES most recently written entries of ``folder``."""
-    entries = sorted(folder.glob("*.npz"), key=lambda f: f.stat().st_mtime, reverse=True)
-    for old in entries[CACHE_MAX_ENTRIES:]:
-        old.unlink(missing_ok=True)
 
 
 def mesh_geometry(path: Path) -> MeshGeometry:
@@ -279,6 +378,8 @@ def load_mesh_file(
     TargetError
         A vertex coordinate is NaN or infinite (the message names no file: callers add it).
     """
+    import trimesh  # noqa: PLC0415  (only to read a mesh file: the cached path needs none)
+
     loaded = trimesh.load(file_obj, file_type=file_type, force=None, process=False, **load_options)
     geometries = loaded.geometry.values() if isinstance(loaded, trimesh.Scene) else [loaded]
     meshes = [g for g in geometries if isinstance(g, trimesh.Trimesh)]
@@ -292,6 +393,8 @@ def load_mesh_file(
 
 def _read_parts(path: Path) -> list[tuple[str, trimesh.Trimesh]]:
     """Read a mesh file as (part name, mesh) pairs with scene transforms applied."""
+    import trimesh  # noqa: PLC0415
+
     try:
         loaded = load_mesh_file(path, file_type=path.suffix.lstrip(".") or None)
     except TargetError as exc:
@@ -331,14 +434,12 @@ def load_target(target: Target) -> TargetModel:
     if not np.isfinite(geometry.vertices).all():
         raise TargetError(f"{path}: the mesh has NaN or infinite vertex coordinates")
     names, face_part = list(geometry.part_names), geometry.face_part
-    # copies: the mesh is scaled and centred in place below
-    mesh = trimesh.Trimesh(
-        geometry.vertices.copy(), geometry.faces.copy(), process=False, validate=False
-    )
-    if not mesh.area > 0:
+    vertices, faces = geometry.vertices, geometry.faces
+    if not _area(vertices, faces) > 0:
         raise TargetError(f"{path}: the mesh has zero surface area (degenerate triangles)")
 
-    extents = mesh.extents
+    bounds = _bounds(vertices, faces)
+    extents = np.ptp(bounds, axis=0)
     if target.scale_m_per_unit > 0:
         scale = target.scale_m_per_unit
     elif "longest_extent_m" in settings:
@@ -351,8 +452,17 @@ def load_target(target: Target) -> TargetModel:
             f"{path}: the target is {longest_m:.3g} m long once scaled ({scale:g} m per unit); "
             f"targets must be {MIN_EXTENT_M:g} m to {MAX_EXTENT_M:g} m long: check the scale"
         )
-    mesh.apply_translation(-mesh.bounds.mean(axis=0))
-    mesh.apply_scale(scale)
+    centring = np.eye(4)
+    centring[:3, 3] = -bounds.mean(axis=0)
+    scaling = np.eye(4)
+    if scale != 1:
+        scaling[:3, :3] *= scale
+    surface = TargetMesh(
+        vertices_m=_transformed_points(_transformed_points(vertices, centring), scaling),
+        faces=np.array(faces, dtype=np.int64),
+    )
+    surface.vertices_m.setflags(write=False)
+    surface.faces.setflags(write=False)
 
     mapping = _material_map(target, folder)
     materials = tuple(mapping.get(n, mapping["*"]) for n in names)
@@ -364,7 +474,7 @@ def load_target(target: Target) -> TargetModel:
     ):
         raise TargetError(f"{path}: body_from_mesh must be a 3 x 3 rotation matrix")
     return TargetModel(
-        mesh=mesh,
+        surface=surface,
         face_part=face_part,
         part_names=tuple(names),
         part_materials=materials,
@@ -412,7 +522,7 @@ def with_materials(model: TargetModel, overrides) -> TargetModel:
             )
         mats[part] = name
     return TargetModel(
-        mesh=model.mesh,
+        surface=model.surface,
         face_part=model.face_part,
         part_names=model.part_names,
         part_materials=tuple(mats[n] for n in model.part_names),

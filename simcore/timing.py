@@ -9,11 +9,9 @@ docs/physics.md#eq-25, docs/physics.md#eq-26, docs/physics.md#eq-31).
 from __future__ import annotations
 
 import numpy as np
-from scipy import constants as sc
 
+from .constants import C
 from .pulse import PulseShape
-
-C = sc.c  # speed of light [m/s]
 
 
 def cfd_delay_s(shape: PulseShape, delay_s: float = 0.0) -> float:

@@ -1,7 +1,5 @@
 """``python -m simcore.cli ...``: the ``lmapd`` command."""
 
-import sys
+from . import run
 
-from . import main
-
-sys.exit(main())
+run()

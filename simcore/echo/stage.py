@@ -8,17 +8,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import constants as sc
 
 from .. import geometry, materials, timing
+from ..constants import C
 from ..pulse import PulseShape, default_time_step_s, scene_pulse_shape
 from ..scene import Scene
 from ..stage import Stage, readonly
 from ..target import TargetModel, with_materials
 from .elements import element_weights, illumination_gain, merge_elements, split_elements
 from .features import EchoFeatures, echo_features
-
-C = sc.c  # speed of light [m/s]
 
 
 @dataclass(frozen=True, kw_only=True)

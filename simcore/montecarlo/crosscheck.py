@@ -4,15 +4,13 @@ instants the CFD compares, and the whole gate for synthetic echoes of a scene.""
 from __future__ import annotations
 
 import numpy as np
-from scipy import constants as sc
 
+from ..constants import C
 from ..pulse import A_FWHM, PulseShape, default_time_step_s, pulse_shape
 from ..receiver import Q_E, ReceiverModel
 from ..timing import cfd_delay_s
 from .discriminator import raw_end_s
 from .gate import McResult, montecarlo_gate
-
-C = sc.c  # speed of light [m/s] (exact)
 
 
 def cfd_sigma_shot_aware_m(

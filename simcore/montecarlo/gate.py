@@ -14,15 +14,14 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy import constants as sc
 
+from ..constants import C
 from ..detection import Outliers
 from ..pulse import PulseShape
 from ..receiver import ReceiverModel
 from .currents import BandLimit, band_limit, noisy_band_limited
 from .discriminator import batches, discriminate, pulse_fwhm_s, raw_end_s, reference_stop_s
 
-C = sc.c  # speed of light [m/s] (exact)
 _THREADS = max(1, min(2, os.cpu_count() or 1))
 _DEFAULT_MAX_BYTES = 64 << 20  # working set per worker thread [bytes]
 _BYTES_PER_SAMPLE = 36  # float32 input, output, FFT buffers and masks per sample of a chunk

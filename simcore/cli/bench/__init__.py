@@ -1,9 +1,10 @@
-"""``lmapd bench``: the stage timings on the MRO (``stages``) or, with ``--tradeoff``, each fidelity
-preset's time against its error (``tradeoff``).
+"""``lmapd bench``: the stage timings on the MRO (``stages``), with ``--tradeoff`` each fidelity
+preset's time against its error (``tradeoff``), with ``--startup`` the phases of ``lmapd simulate``
+in fresh processes (``startup``).
 
-    lmapd bench [--quick] [--json FILE] [--tradeoff --out DIR [--pixels N]]
+    lmapd bench [--quick] [--json FILE] [--tradeoff --out DIR [--pixels N] | --startup]
 
-Both modules load the imaging chain; they are imported when the command runs, not at ``--help``.
+The modules load the imaging chain; they are imported when the command runs, not at ``--help``.
 """
 
 from __future__ import annotations
@@ -24,6 +25,12 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
         action="store_true",
         help="each preset's time against its error relative to reference (needs --out)",
     )
+    bench.add_argument(
+        "--startup",
+        action="store_true",
+        help="lmapd simulate's import, target load, BVH build, first frame and write times, "
+        "in fresh processes (median and range)",
+    )
     bench.add_argument("--out", help="folder for tradeoff.json and tradeoff.png")
     bench.add_argument(
         "--pixels",
@@ -36,6 +43,14 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
 
 def run_cli(args: argparse.Namespace) -> int:
     """Run ``lmapd bench``; the exit status (0). User errors raise CliError."""
+    if args.tradeoff and args.startup:
+        raise CliError("--tradeoff and --startup are two benches: run one at a time")
+    if args.startup:
+        if args.pixels is not None or args.out:
+            raise CliError("--startup runs the paper scene: it takes no --pixels or --out")
+        from . import startup  # noqa: PLC0415
+
+        return startup.main(quick=args.quick, json_path=args.json)
     if args.tradeoff:
         if not args.out:
             raise CliError("--tradeoff needs --out DIR")

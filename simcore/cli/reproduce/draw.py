@@ -6,14 +6,13 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy import constants as sc
 
+from ...constants import C
 from ...materials import MATERIAL_NAMES
 from ...pipeline import Result
 from ...reproduce import fwhm_s
 from ...reproduce import n_peaks as count_peaks
 
-C = sc.c  # speed of light [m/s] (exact)
 # Colours of the library materials (index = material id) and of the false alarms.
 MATERIAL_COLORS = ("#7f7f7f", "#17becf", "#1f5fbf", "#d4a017", "#3a9a3a", "#9467bd")
 OUTLIER_COLOR = "#d62728"

@@ -84,6 +84,7 @@ class _GateSetup:
     cfd_fraction: float
     holdoff_s: float
     first_stop: bool
+    max_stops: int | None
     resolution_s: float
     t_ref_s: float
     raw_end_s: float
@@ -149,6 +150,7 @@ def _gate_chunk(setup: _GateSetup, p0: int, p1: int, rng: np.random.Generator):
         setup.cfd_fraction,
         holdoff_s=setup.holdoff_s,
         first_stop=setup.first_stop,
+        max_stops=setup.max_stops,
         t0_s=setup.t_lo,
         x_padded_a=x if setup.continuous else None,
         band=setup.band if setup.continuous else None,
@@ -204,6 +206,7 @@ def montecarlo_gate(
     cfd_fraction: float,
     resolution_s: float,
     first_stop: bool = False,
+    max_stops: int | None = None,
     holdoff_s: float | None = None,
     noise: bool = True,
     arming: str = "continuous",
@@ -228,7 +231,9 @@ def montecarlo_gate(
     tnr : float -- V_T = tnr sigma_n
     t_d_s, cfd_fraction : float -- CFD delay [s] and fraction (Eq. 19)
     resolution_s : float -- timing resolution T_t [s] (Eq. 26)
-    first_stop : bool -- keep only each pixel's first stop
+    first_stop : bool -- keep only each pixel's first stop (``max_stops = 1``)
+    max_stops : int, optional -- each pixel records at most this many stops (None: no limit); a
+        noise stop before the echo then masks it (docs/physics.md#limited-stops)
     holdoff_s : float, optional -- re-arm hold-off; default one FWHM of the emitted pulse
     noise : bool -- False: noise-free waveforms through the same discriminator
     arming : "continuous" (an analog comparator) or "sampled" (crossings between samples only)
@@ -273,6 +278,7 @@ def montecarlo_gate(
         cfd_fraction=float(cfd_fraction),
         holdoff_s=pulse_fwhm_s(shape) if holdoff_s is None else float(holdoff_s),
         first_stop=first_stop,
+        max_stops=None if max_stops is None else int(max_stops),
         resolution_s=float(resolution_s),
         t_ref_s=t_ref,
         raw_end_s=raw_end_s(shape),
@@ -344,6 +350,7 @@ def montecarlo_detection(
     receiver_model: ReceiverModel,
     scene,
     first_stop: bool = False,
+    max_stops: int | None = None,
     **options,
 ) -> McResult:
     """The Monte Carlo detection stage for the pipeline: one flash of ``scene``.
@@ -356,6 +363,8 @@ def montecarlo_detection(
     scene : Scene -- detector.pixels, laser.pulse_energy_j, timing (tnr, resolution_s,
         cfd_fraction, range_gate_m) and gate_center_m
     first_stop : bool -- keep only each pixel's first stop (default: multi-stop)
+    max_stops : int, optional -- at most this many stops per pixel (the pipeline passes
+        ``timing.max_stops``; None: no limit)
     **options -- passed to :func:`montecarlo_gate` (holdoff_s, noise, arming, max_bytes,
         n_threads)
 
@@ -382,5 +391,6 @@ def montecarlo_detection(
         cfd_fraction=t.cfd_fraction,
         resolution_s=t.resolution_s,
         first_stop=first_stop,
+        max_stops=max_stops,
         **options,
     )

@@ -101,11 +101,9 @@ def echo_survival_probability(t_echo_s, rate_hz: float, max_stops: int, holdoff_
 
 def _poisson_pmf(j: int, mean):
     """P(N = j) for N ~ Poisson(mean), mean (n,) >= 0."""
-    with np.errstate(divide="ignore"):
-        log_mean = np.log(mean)
-    return np.exp(
-        np.where(mean > 0, j * log_mean, 0.0 if j == 0 else -np.inf) - mean - special.gammaln(j + 1)
-    )
+    with np.errstate(divide="ignore", invalid="ignore"):
+        log_term = np.where(mean > 0, j * np.log(mean), 0.0 if j == 0 else -np.inf)
+    return np.exp(log_term - mean - special.gammaln(j + 1))
 
 
 def limited_stops(pixel, range_m, max_stops: int, holdoff_m: float) -> np.ndarray:

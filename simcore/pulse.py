@@ -87,6 +87,10 @@ class PulseShape:
     t_end_s: float  # after this it is < 1e-4 of its peak
     filtered_slope: np.ndarray  # (N,) next-sample differences of the tables, for the lookup
     raw_slope: np.ndarray
+    # (N,) W/J: P0 through h_B^2 normalised to unit area (a Gaussian of sigma_h / sqrt 2): the
+    # current whose shot noise a band-limited sample carries (docs/physics.md#eq-25)
+    shot: np.ndarray
+    shot_slope: np.ndarray
 
     def lookup(self, table: np.ndarray, t_s):
         """Linear interpolation of ``filtered`` or ``raw`` at times t. Both tables are ~0 at their
@@ -105,7 +109,11 @@ class PulseShape:
 
     @property
     def _slopes(self) -> dict[int, np.ndarray]:
-        return {id(self.filtered): self.filtered_slope, id(self.raw): self.raw_slope}
+        return {
+            id(self.filtered): self.filtered_slope,
+            id(self.raw): self.raw_slope,
+            id(self.shot): self.shot_slope,
+        }
 
     def rising_time_s(self, fraction: float) -> float:
         """Time on the rising edge where the band-limited pulse is ``fraction`` of its peak."""
@@ -125,6 +133,9 @@ class PulseShape:
     def raw_at(self, t_s):
         return self.lookup(self.raw, t_s)
 
+    def shot_at(self, t_s):
+        return self.lookup(self.shot, t_s)
+
 
 @lru_cache(maxsize=16)
 def pulse_shape(tau_s: float, a: float, bandwidth_hz: float) -> PulseShape:
@@ -136,6 +147,7 @@ def pulse_shape(tau_s: float, a: float, bandwidth_hz: float) -> PulseShape:
     t = np.linspace(t0, t1, _TABLE_SIZE)
     filt = filtered_pulse_w(t, 1.0, tau_s, a, sigma)
     raw = pulse_power_w(t, 1.0, tau_s, a)
+    shot = filtered_pulse_w(t, 1.0, tau_s, a, sigma / np.sqrt(2.0))
     i_pk = int(np.argmax(filt))
     f = lambda x: -filtered_pulse_w(np.array([x]), 1.0, tau_s, a, sigma)[0]  # noqa: E731
     res = optimize.minimize_scalar(f, bracket=(t[i_pk - 1], t[i_pk], t[i_pk + 1]), tol=1e-12)
@@ -144,11 +156,25 @@ def pulse_shape(tau_s: float, a: float, bandwidth_hz: float) -> PulseShape:
     t_half = optimize.brentq(half, t0, t_pk, xtol=1e-16, rtol=1e-14)
     start = t[np.argmax(filt > 1e-5 * peak)]
     end = t[len(t) - 1 - np.argmax(filt[::-1] > 1e-4 * peak)]
-    slopes = [np.diff(arr, append=arr[-1]) for arr in (filt, raw)]
-    for arr in (filt, raw, *slopes):
+    slopes = [np.diff(arr, append=arr[-1]) for arr in (filt, raw, shot)]
+    for arr in (filt, raw, shot, *slopes):
         arr.setflags(write=False)
     return PulseShape(
-        tau_s, a, sigma, t0, float(t[1] - t[0]), filt, raw, t_half, t_pk, peak, start, end, *slopes
+        tau_s,
+        a,
+        sigma,
+        t0,
+        float(t[1] - t[0]),
+        filt,
+        raw,
+        t_half,
+        t_pk,
+        peak,
+        start,
+        end,
+        *slopes[:2],
+        shot,
+        slopes[2],
     )
 
 

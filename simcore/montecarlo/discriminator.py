@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..pulse import A_FWHM, PulseShape
-from .currents import BandLimit, noisy_band_limited
+from .currents import BandLimit
 
 ARMING_REFINE = 8  # between-sample excursions are looked for at dt / 8
 ARMING_MARGIN = 0.15  # pairs of samples within 15 % below V_T may hide an excursion...
@@ -352,10 +352,10 @@ def reference_stop_s(
     same taps and timed by the same discriminator, noise-free, armed at half its peak [s].
 
     Averaged over ``n_phases`` positions of the pulse's start between two samples, (q + 1/2) dt
-    / n_phases: the sampled convolution of the pulse's onset kink shifts a stop by an amount
-    that depends on where the samples fall and averages to zero over the phases, and echoes
-    arrive at every phase. One pulse starting on a sample (the phase-0 reference) was 3 mm late
-    against the echoes at the default step: the Monte Carlo's range bias."""
+    / n_phases, as echoes arrive at every phase: what sampling leaves of the crossing's error
+    (below 0.1 mm with the cubic crossing) averages out. With the sampled convolution of the
+    sampled pulse, one pulse starting on a sample was 3 mm late against the echoes at the
+    default step (its onset kink): the Monte Carlo's range bias."""
     dt = band.dt_s
     m = band.half_width
     pre = m + math.ceil(t_d_s / dt) + 4
@@ -364,7 +364,8 @@ def reference_stop_s(
     phase_s = dt * (np.arange(n_phases) + 0.5) / n_phases
     x = np.zeros((n_phases, len(t) + 2 * m), dtype=dtype)
     x[:, m : m + len(t)] = shape.raw_at(t[None, :] - phase_s[:, None])
-    y = noisy_band_limited(None, x, None, band, noise=False)  # the echoes' own signal path
+    # the echoes' own signal path: the band-limited pulse in closed form at the sample times
+    y = shape.filtered_at(t[None, :] - phase_s[:, None]).astype(dtype)
     stops = discriminate(
         y, dt, 0.5 * float(y.max()), t_d_s, cfd_fraction, t0_s=t[0], x_padded_a=x, band=band
     )

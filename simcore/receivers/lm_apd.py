@@ -210,18 +210,20 @@ def range_sigma_m(scene: Scene, echo: EchoStage, rx: LmApdResponse) -> np.ndarra
 
 
 def sigma_cfd_per_sample_m(scene: Scene, echo: EchoStage, rx: LmApdResponse) -> np.ndarray:
-    """(n,) Eq. 25 (ours): the CFD samples y(t*) = L i_pk and y(t* - t_d) = k L i_pk (L the
-    echo's level at the firing time, ``cfd_level``) each with the shot noise of its own current
-    (Eq. 10) besides the dark and thermal noise, through the chain. With a saturation
+    """(n,) Eq. 25 (ours): each CFD sample with the shot noise of its own signal current
+    (Eq. 10) besides the dark and thermal noise, through the chain, and their covariance from
+    the current midway between them (``EchoFeatures.cfd_shot_level``). With a saturation
     (``detector.snr_max``) the jitter is at least the equal-noise form's at that SNR."""
-    k = scene.timing.cfd_fraction
-    level = echo.features.cfd_level
-    prompt_a = rx.model.sigma_peak_a(rx.i_pk_a * level)
-    delayed_a = rx.model.sigma_peak_a(rx.i_pk_a * (k * level))
-    args = (echo.features.cfd_slope_per_s, k, echo.cfd_delay_s, echo.shape.sigma_h_s)
-    sigma_m = timing.sigma_cfd_per_sample_m(rx.i_pk_a, delayed_a, prompt_a, *args)
+    i_pk_a = rx.model.responsivity_a_w * rx.peak_power_w  # the band-limited peak
+    level = echo.features.cfd_shot_level
+    delayed_a, prompt_a, mid_a = (rx.model.sigma_peak_a(i_pk_a * level[:, j]) for j in range(3))
+    args = (scene.timing.cfd_fraction, echo.cfd_delay_s, echo.shape.sigma_h_s)
+    slope = echo.features.cfd_slope_per_s
+    sigma_m = timing.sigma_cfd_per_sample_m(
+        i_pk_a, delayed_a, prompt_a, slope, *args, sigma_mid_a=mid_a
+    )
     if np.isfinite(rx.model.snr_max):
-        sigma_m = np.maximum(sigma_m, timing.sigma_cfd_m(rx.model.snr_max, *args))
+        sigma_m = np.maximum(sigma_m, timing.sigma_cfd_m(rx.model.snr_max, slope, *args))
     return sigma_m
 
 

@@ -90,6 +90,8 @@ def echo_survival_probability(t_echo_s, rate_hz: float, max_stops: int, holdoff_
     rate_hz : nu [1/s]; max_stops : K; holdoff_s : h [s]
     """
     t = np.maximum(np.asarray(t_echo_s, dtype=np.float64), 0.0)
+    if holdoff_s == 0.0:  # the Poisson CDF, from the regularised gamma function (exact tails)
+        return special.gammaincc(int(max_stops), rate_hz * t)
     total = np.zeros_like(t)
     for j in range(int(max_stops)):
         free = t - j * holdoff_s

@@ -149,6 +149,9 @@ class Timing:
         MAX_STOPS,
         "stops each pixel records per pulse (1 = first stop); noise stops before the echo mask it",
     )
+    rearm_holdoff_fwhm: float = _f(
+        1.0, "1", 0.0, 100.0, "dead time after a stop, in FWHMs of the emitted pulse (0 = none)"
+    )
 
 
 @dataclass(frozen=True)

@@ -148,8 +148,9 @@ def test_the_detection_probability_includes_the_chance_that_noise_fired_first():
 
 def test_a_k_that_never_binds_draws_what_the_unlimited_model_drew():
     """Section 4 as it was: P_d drawn, range noise, Poisson outliers over the array. With K =
-    16 at TNR 5 no pixel has two events, so the stops keep every one of them."""
-    res = run(tnr=5.0, **{"timing.max_stops": 16})
+    16 at TNR 5 no pixel has two events, so the stops keep every one of them; without a hold-off
+    no echo is masked either, and P_d is Eq. 27's."""
+    res = run(tnr=5.0, **{"timing.max_stops": 16, "timing.rearm_holdoff_fwhm": 0.0})
     scene, d, rx = res.scene, res.detection, res.receiver
     rng = np.random.default_rng([scene.seed, 2024])
     p_echo = detection.detection_probability(rx.i_pk_a, d.threshold_a, rx.sigma_pk_a)
@@ -158,6 +159,7 @@ def test_a_k_that_never_binds_draws_what_the_unlimited_model_drew():
     out = detection.draw_outliers(
         rng, 48**2, d.n_false_per_pixel, scene.gate_center_m, scene.timing.range_gate_m
     )
+    np.testing.assert_array_equal(d.p_detect, p_echo)
     np.testing.assert_array_equal(d.detected, drawn)
     np.testing.assert_array_equal(d.range_m[drawn], r[drawn])
     np.testing.assert_array_equal(d.outliers.pixel, out.pixel)

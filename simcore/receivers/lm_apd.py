@@ -102,7 +102,7 @@ def detect(scene: Scene, echo: EchoStage, rx: LmApdResponse) -> LmApdDetection:
     n_false = false_alarms_per_pixel(scene)
     lo, hi = gate_m(scene)
     p_echo = detection_probability(scene, rx, threshold_a)
-    holdoff_s = stop_holdoff_s(echo)
+    holdoff_s = stop_holdoff_s(scene, echo)
     # the chance that noise stops used up the pixel's stops before its echo (K = 1:
     # 1 - exp(-nu t_e)), in the detection probability
     rate_hz = n_false / (2.0 * (hi - lo) / timing.C)
@@ -115,7 +115,9 @@ def detect(scene: Scene, echo: EchoStage, rx: LmApdResponse) -> LmApdDetection:
         # false alarms; P_d and sigma above stay the statistical model's, for comparison
         from .. import montecarlo  # noqa: PLC0415  (imported only when the MC model is asked for)
 
-        mc = montecarlo.montecarlo_detection(rng, echo, rx.model, scene, max_stops=t.max_stops)
+        mc = montecarlo.montecarlo_detection(
+            rng, echo, rx.model, scene, max_stops=t.max_stops, holdoff_s=holdoff_s
+        )
         drawn, r_meas_m, outliers = mc.detected, mc.range_m, mc.outliers
     else:  # Section 4: Eq. 27 draws the detection, Eq. 24 the range noise, Eq. 28 the outliers
         drawn = rng.random(n) < p_echo
@@ -146,9 +148,10 @@ def gate_m(scene: Scene) -> tuple[float, float]:
     return max(0.0, scene.gate_center_m - half), scene.gate_center_m + half
 
 
-def stop_holdoff_s(echo: EchoStage) -> float:
-    """The re-arm hold-off after a stop: one FWHM of the emitted pulse [s] (the Monte Carlo's)."""
-    return echo.shape.tau_s * A_FWHM / echo.shape.a
+def stop_holdoff_s(scene: Scene, echo: EchoStage) -> float:
+    """The re-arm hold-off after a stop: ``timing.rearm_holdoff_fwhm`` FWHMs of the emitted
+    pulse [s] (one by default, the Monte Carlo's)."""
+    return scene.timing.rearm_holdoff_fwhm * echo.shape.tau_s * A_FWHM / echo.shape.a
 
 
 def _limited_stops(rng, scene, echo_pixel, echo_range_m, n_false, holdoff_s):

@@ -67,3 +67,141 @@ def draw_outliers(
     lo = max(0.0, gate_center_m - gate_m / 2.0)
     hi = gate_center_m + gate_m / 2.0
     return Outliers(pixel=pixel.astype(np.int64), range_m=rng.uniform(lo, hi, size=n_out))
+
+
+# ----------------------------------------------------------------------------------------------
+# limited stops (docs/physics.md#limited-stops): at most K stops per pixel and pulse
+# ----------------------------------------------------------------------------------------------
+def echo_survival_probability(t_echo_s, rate_hz: float, max_stops: int, holdoff_s: float):
+    """Probability that an echo arriving ``t_echo_s`` after the gate opens still finds the
+    discriminator armed: fewer than K noise stops before it, and it not inside the dead time
+    (the re-arm hold-off h) of the last one [1].
+
+    Noise up-crossings are a Poisson process of rate nu (Eq. 28 per unit time); after a stop
+    the next noise stop is h + Exp(nu) later, so the j-th noise stop is at j h + Gamma(j, nu)
+    and the echo survives with probability
+
+        sum_{j=0}^{K-1} Poisson(j; nu (t_e - j h))   (terms with t_e < j h are 0),
+
+    exp(-nu t_e) for K = 1, the Poisson CDF P(N(t_e) < K) for h = 0.
+
+    t_echo_s : (n,) echo time since the gate opened [s] (negative: before the gate, 1)
+    rate_hz : nu [1/s]; max_stops : K; holdoff_s : h [s]
+    """
+    t = np.maximum(np.asarray(t_echo_s, dtype=np.float64), 0.0)
+    if holdoff_s == 0.0:  # the Poisson CDF, from the regularised gamma function (exact tails)
+        return special.gammaincc(int(max_stops), rate_hz * t)
+    total = np.zeros_like(t)
+    for j in range(int(max_stops)):
+        free = t - j * holdoff_s
+        if not (free >= 0.0).any():
+            break
+        total += np.where(free >= 0.0, _poisson_pmf(j, rate_hz * np.maximum(free, 0.0)), 0.0)
+    return np.minimum(total, 1.0)
+
+
+def _poisson_pmf(j: int, mean):
+    """P(N = j) for N ~ Poisson(mean), mean (n,) >= 0."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        log_term = np.where(mean > 0, j * np.log(mean), 0.0 if j == 0 else -np.inf)
+    return np.exp(log_term - mean - special.gammaln(j + 1))
+
+
+def limited_stops(pixel, range_m, max_stops: int, holdoff_m: float) -> np.ndarray:
+    """Which events become stops when each pixel records at most ``max_stops`` per pulse and is
+    dead for ``holdoff_m`` (as range, c h / 2) after each stop: (n,) bool.
+
+    pixel : (n,) int -- flat pixel index of each event (noise up-crossing or echo)
+    range_m : (n,) float -- its range [m] (time since emission, c t / 2)
+    An event is a stop if it is at least ``holdoff_m`` after the pixel's previous stop and the
+    pixel has fewer than ``max_stops`` stops before it. Events of one pixel are taken in time
+    order; ties keep their input order.
+    """
+    pixel = np.asarray(pixel, dtype=np.int64)
+    range_m = np.asarray(range_m, dtype=np.float64)
+    n = len(pixel)
+    accepted = np.zeros(n, dtype=bool)
+    if n == 0:
+        return accepted
+    order = np.lexsort((np.arange(n), range_m, pixel))
+    p_sorted = pixel[order]
+    first = np.ones(n, dtype=bool)
+    first[1:] = p_sorted[1:] != p_sorted[:-1]
+    start = np.flatnonzero(first)
+    group = np.cumsum(first) - 1  # compact pixel id of each sorted event
+    rank = np.arange(n) - start[group]
+    dead_until = np.full(len(start), -np.inf)
+    count = np.zeros(len(start), dtype=np.int64)
+    r_sorted = range_m[order]
+    by_rank = np.argsort(rank, kind="stable")
+    bounds = np.cumsum(np.bincount(rank))
+    lo = 0
+    for hi in bounds:  # one pass per rank: the k-th event of every pixel at once
+        sel = by_rank[lo:hi]
+        lo = hi
+        g = group[sel]
+        ok = (r_sorted[sel] >= dead_until[g]) & (count[g] < max_stops)
+        sel, g = sel[ok], g[ok]
+        accepted[order[sel]] = True
+        dead_until[g] = r_sorted[sel] + holdoff_m
+        count[g] += 1
+    return accepted
+
+
+def draw_limited_stops(
+    rng: np.random.Generator,
+    n_pixels_total: int,
+    echo_pixel,
+    echo_range_m,
+    rate_per_m: float,
+    gate_lo_m: float,
+    gate_hi_m: float,
+    max_stops: int,
+    holdoff_m: float,
+) -> tuple[np.ndarray, Outliers]:
+    """One pulse of every pixel with at most ``max_stops`` stops, drawn stop by stop: memory
+    and time O(pixels x K) whatever the false-alarm rate (docs/physics.md#limited-stops).
+
+    From the gate's opening (or the end of the last stop's dead time) the next noise stop is an
+    exponential wait of rate ``rate_per_m`` (Poisson up-crossings are memoryless); the echo, if
+    it is still ahead, is the stop when it comes first; an echo inside a dead time is lost.
+
+    echo_pixel : (n,) int -- flat pixel index of each lit pixel
+    echo_range_m : (n,) float -- range of its echo if the echo crosses the threshold (drawn
+        with P_d), NaN if not [m]
+    rate_per_m : noise stops per metre of range (nu 2 / c) [1/m]
+    gate_lo_m, gate_hi_m : the gate [m]; holdoff_m : dead time after a stop, as range [m]
+    Returns (n,) bool (the echo is a stop) and the false-alarm stops as Outliers.
+    """
+    echo_at = np.full(n_pixels_total, np.inf)
+    r = np.asarray(echo_range_m, dtype=np.float64)
+    has = np.isfinite(r) & (r >= gate_lo_m) & (r <= gate_hi_m)
+    echo_at[np.asarray(echo_pixel)[has]] = r[has]
+    echo_stop = np.zeros(n_pixels_total, dtype=bool)
+    start = np.full(n_pixels_total, float(gate_lo_m))
+    active = np.arange(n_pixels_total)
+    out_pixel, out_range = [], []
+    for _ in range(int(max_stops)):
+        if not len(active):
+            break
+        t0 = start[active]
+        lost = echo_at[active] < t0  # the echo fell into the last dead time
+        echo_at[active[lost]] = np.inf
+        noise = (
+            t0 + rng.exponential(1.0 / rate_per_m, size=len(active))
+            if rate_per_m > 0
+            else (np.full(len(active), np.inf))
+        )
+        is_echo = echo_at[active] <= noise
+        stop = np.where(is_echo, echo_at[active], noise)
+        inside = stop <= gate_hi_m
+        echo_stop[active[is_echo & inside]] = True
+        echo_at[active[is_echo]] = np.inf
+        fa = inside & ~is_echo
+        out_pixel.append(active[fa])
+        out_range.append(stop[fa])
+        start[active] = stop + holdoff_m
+        active = active[inside]
+    pix = np.concatenate(out_pixel) if out_pixel else np.zeros(0, np.int64)
+    rng_m = np.concatenate(out_range) if out_range else np.zeros(0)
+    return echo_stop[np.asarray(echo_pixel)], Outliers(pixel=pix.astype(np.int64), range_m=rng_m)

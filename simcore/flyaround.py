@@ -62,9 +62,10 @@ class FlyaroundResult:
         Pose of the target body in the lidar sensor frame at each frame time.
     records : list of dict
         One per frame, in time order: ``t_s`` [s], ``distance_m`` [m], ``quaternion_wxyz`` (4,),
-        ``angles_deg`` (3,) [deg], ``n_points``, ``n_outliers``, ``n_dropped``, ``n_hit_pixels``,
-        ``snr_median``, ``range_sigma_m_median`` [m] (None without detections), ``frame_s``
-        [s] (wall time of the frame, its PLY included) and ``ply`` (file name, or None).
+        ``angles_deg`` (3,) [deg], ``n_points``, ``n_outliers``, ``n_dropped``, ``n_unlit``,
+        ``n_hit_pixels``, ``snr_median``, ``range_sigma_m_median`` [m] (None without
+        detections), ``frame_s`` [s] (wall time of the frame, its PLY included) and ``ply``
+        (file name, or None).
     target_name, target_credit : str
         The target model's display name and the credit line its use requires.
     wall_s : float
@@ -242,6 +243,7 @@ _SUMMARY_KEYS = (
     "n_points",
     "n_outliers",
     "n_dropped",
+    "n_unlit",
     "n_hit_pixels",
     "snr_median",
     "range_sigma_m_median",

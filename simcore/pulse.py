@@ -74,7 +74,7 @@ def filtered_pulse_w(t_s, energy_j: float, tau_s: float, a: float, sigma_s: floa
     return p_max * np.e * lam * out
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class PulseShape:
     """The emitted pulse and its band-limited copy, tabulated per joule.
 
@@ -96,6 +96,10 @@ class PulseShape:
     t_end_s: float  # after this it is < 1e-4 of its peak
     filtered_slope: np.ndarray  # (N,) next-sample differences of the tables, for the lookup
     raw_slope: np.ndarray
+    # (N,) W/J: P0 through h_B^2 normalised to unit area (a Gaussian of sigma_h / sqrt 2): the
+    # current whose shot noise a band-limited sample carries (docs/physics.md#eq-25)
+    shot: np.ndarray
+    shot_slope: np.ndarray
 
     def lookup(self, table: np.ndarray, t_s):
         """Linear interpolation of ``filtered`` or ``raw`` at times t. Both tables are ~0 at their
@@ -114,7 +118,11 @@ class PulseShape:
 
     @property
     def _slopes(self) -> dict[int, np.ndarray]:
-        return {id(self.filtered): self.filtered_slope, id(self.raw): self.raw_slope}
+        return {
+            id(self.filtered): self.filtered_slope,
+            id(self.raw): self.raw_slope,
+            id(self.shot): self.shot_slope,
+        }
 
     def rising_time_s(self, fraction: float) -> float:
         """Time on the rising edge where the band-limited pulse is ``fraction`` of its peak."""
@@ -134,6 +142,9 @@ class PulseShape:
     def raw_at(self, t_s):
         return self.lookup(self.raw, t_s)
 
+    def shot_at(self, t_s):
+        return self.lookup(self.shot, t_s)
+
 
 @lru_cache(maxsize=16)
 def pulse_shape(tau_s: float, a: float, bandwidth_hz: float) -> PulseShape:
@@ -142,16 +153,34 @@ def pulse_shape(tau_s: float, a: float, bandwidth_hz: float) -> PulseShape:
     t = table_times_s(tau_s, a, sigma)
     filt = filtered_pulse_w(t, 1.0, tau_s, a, sigma)
     raw = pulse_power_w(t, 1.0, tau_s, a)
+    shot = filtered_pulse_w(t, 1.0, tau_s, a, sigma / np.sqrt(2.0))
     t_pk, peak, t_half = cached_timing_marks(
         (tau_s, a, bandwidth_hz), lambda: timing_marks(t, filt, tau_s, a, sigma)
     )
     start = t[np.argmax(filt > 1e-5 * peak)]
     end = t[len(t) - 1 - np.argmax(filt[::-1] > 1e-4 * peak)]
-    slopes = [np.diff(arr, append=arr[-1]) for arr in (filt, raw)]
-    for arr in (filt, raw, *slopes):
+    slopes = [np.diff(arr, append=arr[-1]) for arr in (filt, raw, shot)]
+    for arr in (filt, raw, shot, *slopes):
         arr.setflags(write=False)
-    t0, step = float(t[0]), float(t[1] - t[0])
-    return PulseShape(tau_s, a, sigma, t0, step, filt, raw, t_half, t_pk, peak, start, end, *slopes)
+    filtered_slope, raw_slope, shot_slope = slopes
+    return PulseShape(
+        tau_s=tau_s,
+        a=a,
+        sigma_h_s=sigma,
+        t0_s=float(t[0]),
+        step_s=float(t[1] - t[0]),
+        filtered=filt,
+        raw=raw,
+        t_half_s=t_half,
+        t_peak_s=t_pk,
+        peak_w_per_j=peak,
+        t_start_s=start,
+        t_end_s=end,
+        filtered_slope=filtered_slope,
+        raw_slope=raw_slope,
+        shot=shot,
+        shot_slope=shot_slope,
+    )
 
 
 def table_times_s(tau_s: float, a: float, sigma_s: float) -> np.ndarray:

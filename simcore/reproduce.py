@@ -183,6 +183,7 @@ def run_summary(result: Result) -> dict[str, Any]:
         "n_target_points",
         "n_outliers",
         "n_dropped",
+        "n_unlit",
         "p_detect_mean",
         "snr_median",
         "range_sigma_m_median",

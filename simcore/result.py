@@ -124,16 +124,20 @@ class Result:
         attrs = self.attributes
         n_out = int(attrs["is_outlier"].sum())
         n_hit = int(self.hits.hit_pixel_mask.sum())
+        n_lit = len(self.echo.pixel)
         n_target_points = len(self.cloud) - n_out
         finite_sigma = d.range_sigma_m[d.detected]
         return {
             "n_pixels": self.pixels**2,
             "n_hit_pixels": n_hit,
-            "n_lit_pixels": len(self.echo.pixel),
+            "n_lit_pixels": n_lit,
             "n_points": len(self.cloud),
             "n_target_points": n_target_points,
             "n_outliers": n_out,
-            "n_dropped": n_hit - n_target_points,
+            # lit pixels that see the target and give no point; hit pixels outside the lit
+            # spot (no echo at all) are counted on their own
+            "n_dropped": n_lit - n_target_points,
+            "n_unlit": n_hit - n_lit,
             "p_detect_mean": _stat(d.p_detect, np.mean),
             "snr_median": _stat(r.snr, np.median),
             "range_sigma_m_median": _stat(finite_sigma, np.median),

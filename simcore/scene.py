@@ -127,6 +127,12 @@ class Amplifiers:
     )
 
 
+# The most stops per pixel and pulse ``timing.max_stops`` may ask for: multi-hit LM-APD readouts
+# record a few (first stop is the common case); 16 bounds the false alarms of a frame at 16 per
+# pixel whatever the TNR (docs/physics.md#limited-stops).
+MAX_STOPS = 16
+
+
 @dataclass(frozen=True)
 class Timing:
     tnr: float = _f(5.0, "1", 0.0, 50.0, "threshold-to-noise ratio: V_T = tnr * sigma_n")
@@ -137,6 +143,16 @@ class Timing:
     )
     range_gate_m: float = _f(1000.0, "m", 0.0, 1e6, "range gate length R_gate", lo_open=True)
     gate_center_m: float = _f(0.0, "m", 0.0, 1e6, "range gate centre R_st; 0 = the target distance")
+    max_stops: int = _f(
+        1,
+        "1",
+        1,
+        MAX_STOPS,
+        "stops each pixel records per pulse (1 = first stop); noise stops before the echo mask it",
+    )
+    rearm_holdoff_fwhm: float = _f(
+        1.0, "1", 0.0, 100.0, "dead time after a stop, in FWHMs of the emitted pulse (0 = none)"
+    )
 
 
 @dataclass(frozen=True)
@@ -243,6 +259,9 @@ PAPER_FORMS = (
     "pulse_constant",  # Eq. 1: a = 3.5 instead of 2.446 (tau is then not the FWHM)
     "eq30_4pi",  # Eq. 30: extra 1/(4 pi) and no cos(theta)
     "eq25_risetime",  # Eq. 25: c * tau_r * sqrt(1+k^2) / (SNR (1-k))
+    # Eq. 25 (ours until issue 16): the peak's noise at both CFD samples, (c/2) sqrt(1 + k^2 -
+    # 2 k rho_n) / (SNR |ds/dt|); pessimistic where shot noise matters (eq25_risetime wins over it)
+    "eq25_equal_noise",
     "eq29_one_way",  # Eq. 29: one-way delays of the relief along the boresight
     "eq28_paper",  # Eq. 28: 2.2 * (2 R_gate / c) * df * 0.5 erfc(TNR / sqrt 2)
     "eq27_paper",  # Eq. 27: single-look, thermal-only 0.5 + 0.5 erf((SNR - TNR)/sqrt 2)

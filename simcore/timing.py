@@ -31,9 +31,53 @@ def noise_autocorrelation(lag_s: float, sigma_h_s: float) -> float:
     return float(np.exp(-(lag_s**2) / (4.0 * sigma_h_s**2)))
 
 
+def sigma_cfd_per_sample_m(
+    i_pk_a,
+    sigma_delayed_a,
+    sigma_prompt_a,
+    slope_per_s,
+    cfd_fraction: float,
+    delay_s: float,
+    sigma_h_s: float,
+    sigma_mid_a=None,
+):
+    """Eq. 25 (ours), each CFD sample with its own noise   [m]:
+
+    (c/2) sqrt(sig_a^2 + k^2 sig_b^2 - 2 k rho_n(t_d) sig_m^2) / (i_pk |ds/dt|)
+
+    with sig_a the noise of the delayed sample y(t* - t_d), sig_b that of y(t*), k the CFD
+    fraction and rho_n(t_d) the noise autocorrelation at the CFD delay ``delay_s`` [s]. The
+    noise of s = y(t - t_d) - k y(t) is n(t* - t_d) - k n(t*); the crossing moves by its rms over
+    the slope. The covariance of the two samples is rho_n sig_m^2: for white noise through the
+    Gaussian h_B, shot noise included, sig_m is the noise of the current midway between the
+    samples (``sigma_mid_a``); without it sig_m^2 = sig_a sig_b (PHYSICS row 25's form, 5-13 %
+    above the Monte Carlo at SNR 20-200 with the default receiver). With sig_a = sig_b = sig_m
+    = i_pk / SNR it is :func:`sigma_cfd_m` exactly.
+
+    i_pk_a : (n,) band-limited peak signal current [A]
+    sigma_delayed_a, sigma_prompt_a : (n,) noise currents at the two samples [A rms] (each with
+        the shot noise of its own current, and any other per-pixel noise the caller adds, such
+        as a background's)
+    sigma_mid_a : (n,) noise current midway between the samples [A rms], optional
+    slope_per_s : (n,) |ds/dt| of the peak-normalised CFD signal at its firing time [1/s]
+    Zero current or slope gives inf (the pixel is then not detected anyway).
+    """
+    rho = noise_autocorrelation(delay_s, sigma_h_s)
+    sa = np.asarray(sigma_delayed_a, dtype=np.float64)
+    sb = np.asarray(sigma_prompt_a, dtype=np.float64)
+    k = cfd_fraction
+    cov = sa * sb if sigma_mid_a is None else np.asarray(sigma_mid_a, dtype=np.float64) ** 2
+    var = np.maximum(sa**2 + k**2 * sb**2 - 2.0 * k * rho * cov, 0.0)
+    den = np.asarray(i_pk_a, dtype=np.float64) * np.asarray(slope_per_s, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(den > 0, 0.5 * C * np.sqrt(var) / np.where(den > 0, den, 1.0), np.inf)
+
+
 def sigma_cfd_m(snr, slope_per_s, cfd_fraction: float, delay_s: float, sigma_h_s: float):
-    """Eq. 25 (ours): (c/2) sqrt(1 + k^2 - 2 k rho_n(t_d)) / (SNR |ds/dt|)   [m], k the CFD
-    fraction, t_d = ``delay_s`` the CFD delay [s].
+    """Eq. 25 with equal noise at both CFD samples (the paper form ``eq25_equal_noise``):
+    (c/2) sqrt(1 + k^2 - 2 k rho_n(t_d)) / (SNR |ds/dt|)   [m], k the CFD fraction, t_d =
+    ``delay_s`` the CFD delay [s]. The noise of the peak at both samples: pessimistic where the
+    signal's shot noise matters (docs/physics.md#paper-form-eq25_equal_noise).
 
     snr : (n,) SNR_na; slope_per_s : (n,) |ds/dt| of the peak-normalised CFD signal at its firing
     time. Zero SNR or slope gives inf (the pixel is then not detected anyway).

@@ -68,6 +68,8 @@ ALTERNATIVES = {
     "timing.cfd_delay_s": (1e-9, {}),
     "timing.range_gate_m": (40.0, {}),
     "timing.gate_center_m": (160.0, {}),
+    "timing.max_stops": (3, {}),
+    "timing.rearm_holdoff_fwhm": (40.0, {"timing.max_stops": 3}),
     "target.mesh": ("other", {}),  # a single plate
     "target.scale_m_per_unit": (1.2, {}),
     "target.material_map": ("map", {"target.materials": {}}),  # a map file

@@ -65,7 +65,7 @@ def run_cli(args: argparse.Namespace) -> int:
     total_ms = 1e3 * sum(result.timings_s.values())
     say(
         f"{summary['n_points']} points ({summary['n_outliers']} outliers, "
-        f"{summary['n_dropped']} of {summary['n_hit_pixels']} hit pixels dropped) "
+        f"{summary['n_dropped']} of {summary['n_lit_pixels']} lit pixels dropped) "
         f"-> {out}  [{total_ms:.0f} ms]"
     )
     return 0

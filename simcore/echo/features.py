@@ -20,12 +20,19 @@ class EchoFeatures:
     cfd_slope_per_s : (n,) |ds/dt| of the normalised CFD signal s = y_n(t - t_d) - k y_n(t) at its
         firing time (Eq. 25; t_d the CFD delay, k the CFD fraction) [1/s]
     peak_raw_w_per_j : (n,) peak of the unfiltered echo P_r (paper's Eq. 14 form), or None
+    cfd_shot_level : (n, 3) the signal current whose shot noise the CFD's samples carry, over
+        the band-limited peak [1]: the echo through h_B^2 (unit area) at the delayed sample
+        t* - t_d, at the prompt sample t*, and midway, t* - t_d / 2 (the two samples' shot-noise
+        covariance); t* the firing time (t_half + t_d where the CFD signal has no crossing).
+        For a single surface with the defaults 0.55, 1.09, 0.94. Eq. 25 (ours) gives each
+        sample the shot noise of its own current with them.
     """
 
     peak_w_per_j: np.ndarray
     t_half_s: np.ndarray
     cfd_slope_per_s: np.ndarray
     peak_raw_w_per_j: np.ndarray | None
+    cfd_shot_level: np.ndarray
 
 
 def _eval_exact(shape: PulseShape, table, arrivals, weights, t):
@@ -116,12 +123,15 @@ def _features_chunk(
     slope_cfd = (cfd(t_star + h) - cfd(t_star - h)) / (2 * h)
     slope_half = (exact(t_half + h) - exact(t_half - h)) / (2 * h) / norm
     slope = np.abs(np.where(found, slope_cfd, slope_half))
+    t_fire = np.where(found, t_star, t_half + cfd_delay_s)
+    shot = lambda t: _eval_exact(shape, shape.shot, arrivals, weights, t) / norm  # noqa: E731
+    level = (shot(t_fire - cfd_delay_s), shot(t_fire), shot(t_fire - 0.5 * cfd_delay_s))
 
     peak_raw = None
     if raw:
         yr = np.einsum("nlk,nk->nl", shape.raw_at(grid[:, :, None] - arrivals[:, None, :]), weights)
         peak_raw = _refined_peak(shape, shape.raw, arrivals, weights, grid, yr, dt_s)
-    return peak, t_half, slope, peak_raw
+    return peak, t_half, slope, peak_raw, *level
 
 
 def echo_features(
@@ -153,6 +163,7 @@ def echo_features(
     peak = np.zeros(n)
     t_half = np.zeros(n)
     slope = np.zeros(n)
+    level = np.zeros((n, 3))
     peak_raw = np.zeros(n) if raw_peak else None
 
     single = np.flatnonzero(count == 1)
@@ -161,6 +172,7 @@ def echo_features(
         w, t = weights[single, j], arrivals[single, j]
         one = _single_element(shape, dt_s, cfd_delay_s, cfd_fraction, raw_peak)
         peak[single], t_half[single], slope[single] = w * one[0], t + one[1], one[2]
+        level[single] = one[4:7]
         if raw_peak:
             peak_raw[single] = w * one[3]
 
@@ -173,6 +185,7 @@ def echo_features(
         w = w1[close] + w2[close]
         out = table.features(t2[close] - t1[close], w1[close] / w)
         peak[sel], t_half[sel], slope[sel] = w * out[0], t1[close] + out[1], out[2]
+        level[sel] = np.stack(out[4:7], axis=1)
         if raw_peak:
             peak_raw[sel] = w * out[3]
         count = count.copy()
@@ -206,10 +219,15 @@ def echo_features(
             outputs = [work(job) for job in jobs]
         for sel, out in outputs:
             peak[sel], t_half[sel], slope[sel] = out[0], out[1], out[2]
+            level[sel] = np.stack(out[4:7], axis=1)
             if raw_peak:
                 peak_raw[sel] = out[3]
     return EchoFeatures(
-        peak_w_per_j=peak, t_half_s=t_half, cfd_slope_per_s=slope, peak_raw_w_per_j=peak_raw
+        peak_w_per_j=peak,
+        t_half_s=t_half,
+        cfd_slope_per_s=slope,
+        peak_raw_w_per_j=peak_raw,
+        cfd_shot_level=level,
     )
 
 
@@ -280,10 +298,10 @@ class PairTable:
     """Features of the two-element echo (weights q, 1 - q at delays 0 and d) on a grid of
     separations d in [0, max_separation_s] and shares q in [0, 1], bilinearly interpolated. A
     two-element echo of total weight W at t1, t2 has peak W P(d, q), half-maximum t1 + T(d, q) and
-    CFD slope S(d, q) (the normalised CFD signal does not scale with W)."""
+    CFD slope S(d, q) and shot levels L (the normalised CFD signal does not scale with W)."""
 
     max_separation_s: float
-    grid: tuple  # (P, T, S, R) arrays of shape (n_d, n_q); R (raw peak) or None
+    grid: tuple  # (P, T, S, R, L_d, L_p, L_m) arrays (n_d, n_q); R (raw peak) or None
 
     def features(self, d, q) -> tuple:
         n_d, n_q = self.grid[0].shape
@@ -323,23 +341,23 @@ def _pair_table(
         arrivals = np.stack([np.zeros(d.size), d.ravel()], axis=1)
         weights = np.stack([q.ravel(), 1.0 - q.ravel()], axis=1)
         jobs = _jobs(shape, arrivals, weights, np.arange(d.size), dt_s, cfd_delay_s, 1 << 22)
-        grid = [np.zeros(d.size) for _ in range(4)]
+        grid = [np.zeros(d.size) for _ in range(7)]
         for pixels, args in jobs:
             for g, v in zip(grid, _features_chunk(shape, *args, cfd_fraction, raw), strict=True):
                 if v is not None:
                     g[pixels] = v
         grid = [g.reshape(d.shape) for g in grid]
-        _PAIRS[key] = PairTable(reach, (*grid[:3], grid[3] if raw else None))
+        _PAIRS[key] = PairTable(reach, (*grid[:3], grid[3] if raw else None, *grid[4:]))
     return _PAIRS[key]
 
 
 def _single_element(
     shape: PulseShape, dt_s: float, cfd_delay_s: float, cfd_fraction: float, raw: bool
 ) -> tuple:
-    """Features (peak, t_half, slope, raw peak) of the reference pulse arriving at t = 0 with
-    unit weight, computed like any echo's and kept: a one-element echo is this pulse shifted and
-    scaled (its half-maximum and CFD crossings move with the arrival; the slope of the normalised
-    CFD signal does not change)."""
+    """Features (peak, t_half, slope, raw peak, 3 CFD shot levels) of the reference pulse
+    arriving at t = 0 with unit weight, computed like any echo's and kept: a one-element echo is
+    this pulse shifted and scaled (its half-maximum and CFD crossings move with the arrival; the
+    slope of the normalised CFD signal and its shot levels do not change)."""
     key = (shape.tau_s, shape.a, shape.sigma_h_s, dt_s, cfd_delay_s, cfd_fraction, raw)
     if key not in _SINGLE:
         if len(_SINGLE) > 64:

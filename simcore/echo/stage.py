@@ -98,6 +98,7 @@ def stage_echo(scene: Scene, tgt: geometry.TargetStage, hits: geometry.Hits) -> 
         t_half_s=merged("t_half"),
         cfd_slope_per_s=merged("slope"),
         peak_raw_w_per_j=merged("peak_raw") if raw else None,
+        cfd_shot_level=np.concatenate([b["level"] for b in blocks])[order],
     )
     arrivals, weights = merged("arrivals"), merged("weights")
     readonly(arrivals, weights)
@@ -175,6 +176,7 @@ def _echo_block(
         "t_half": feats.t_half_s,
         "slope": feats.cfd_slope_per_s,
         "peak_raw": feats.peak_raw_w_per_j if feats.peak_raw_w_per_j is not None else None,
+        "level": feats.cfd_shot_level,
         "material_id": material_id.astype(np.int32),
         "facet_id": facet_id.astype(np.int32),
     }

@@ -77,12 +77,15 @@ def noisy_band_limited(
     receiver: ReceiverModel | None,
     band: BandLimit,
     noise: bool,
+    add_signal: bool = True,
 ) -> np.ndarray:
     """Add the white current noise to the padded signal ``x`` IN PLACE, band-limit it.
 
     x : (n, L + 2 m) signal current i_s [A] with m = band.half_width samples either side of the
         output window; becomes signal + white noise (the input of h_B).
     Returns y : (n, L) band-limited current [A] ('valid' convolution: y[j] is at x's sample j + m).
+    With ``add_signal=False`` y holds the band-limited noise only (its shot part still follows x):
+    the caller adds the band-limited signal itself (the gate adds it in closed form).
 
     The white sample variance ``S(t) / (2 dt)`` is drawn as a signal-free part for every sample
     plus an independent shot part where i_s > 0: the same normal law. The convolution is linear,
@@ -95,7 +98,7 @@ def noisy_band_limited(
     m = band.half_width
     n_cols = x.shape[1]
     taps = band.taps.astype(x.dtype)[None, :]
-    rows = np.flatnonzero((x > 0).any(axis=1))
+    rows = np.flatnonzero((x > 0).any(axis=1)) if add_signal or noise else np.zeros(0, np.int64)
     if noise:
         white = rng.standard_normal(x.shape, dtype=x.dtype)
         white *= x.dtype.type(receiver.sigma_n_a / math.sqrt(2.0 * dt * receiver.bandwidth_hz))
@@ -108,7 +111,7 @@ def noisy_band_limited(
     else:
         white = None
         y = np.zeros((x.shape[0], n_cols - 2 * m), dtype=x.dtype)
-    if len(rows):
+    if add_signal and len(rows):
         nz = x[rows] > 0
         first = np.argmax(nz, axis=1)
         last = n_cols - 1 - np.argmax(nz[:, ::-1], axis=1)

@@ -9,12 +9,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..pulse import A_FWHM, PulseShape
-from .currents import BandLimit, noisy_band_limited
+from .currents import BandLimit
 
 ARMING_REFINE = 8  # between-sample excursions are looked for at dt / 8
 ARMING_MARGIN = 0.15  # pairs of samples within 15 % below V_T may hide an excursion...
 ARMING_CURVATURE = 0.25  # ...if their curvature can lift them to V_T (see _refined_crossings)
 ARMING_SLACK = 0.02  # fraction of V_T added to that reach
+REFERENCE_PHASES = 16  # the reference stop is averaged over this many grid phases
 RAW_TAIL = 1e-9  # the emitted pulse is cut where it falls below 1e-9 of its peak
 
 
@@ -184,12 +185,70 @@ def _cfd_stop(y, row, t_a, jpk, delay, cfd_fraction):
         rows = np.arange(len(sel))
         t_star[sel[has]] = tc[rows, last][has]
         fired[sel[has]] = True
+    done = np.flatnonzero(fired)
+    t_star[done] = _cubic_crossing(y, row[done], t_star[done], delay, cfd_fraction)
     return t_star, fired
 
 
-def _apply_holdoff(row, t_a, t_star, holdoff, first_stop):
+def _cubic_at(y, row, t):
+    """y at fractional sample positions t (one per row) by 4-point (cubic) Lagrange
+    interpolation: exact for cubics, error O(dt^4) on the smooth band-limited current."""
+    length = y.shape[1]
+    base = np.floor(t).astype(np.int64)
+    u = t - base
+    cols = np.clip(base[:, None] + np.arange(-1, 3)[None, :], 0, length - 1)
+    v = y[row[:, None], cols].astype(np.float64)
+    w = np.stack(
+        [
+            -u * (u - 1.0) * (u - 2.0) / 6.0,
+            (u + 1.0) * (u - 1.0) * (u - 2.0) / 2.0,
+            -(u + 1.0) * u * (u - 2.0) / 2.0,
+            (u + 1.0) * u * (u - 1.0) / 6.0,
+        ],
+        axis=1,
+    )
+    return np.einsum("nk,nk->n", v, w)
+
+
+def _cubic_crossing(y, row, t_lin, delay, cfd_fraction, steps: int = 4):
+    """The CFD zero crossing refined on the cubic interpolant of the samples (samples units).
+
+    The linear crossing of the sampled s(t) (a linear delayed copy, a chord between samples) is
+    biased by the curvature of y, by an amount that depends on where the samples fall: -3 mm in
+    mean at the default step, and a reference pulse sampled at one phase does not share it.
+    Regula falsi (Illinois) on s(t) = y_c(t - t_d) - k y_c(t), y_c the cubic interpolant, in the
+    sample interval of the linear crossing; where the interpolant does not bracket a root there,
+    the linear crossing stays.
+    """
+    if len(row) == 0:
+        return t_lin
+
+    def s(t):
+        return _cubic_at(y, row, t - delay) - cfd_fraction * _cubic_at(y, row, t)
+
+    a = np.floor(t_lin)
+    b = a + 1.0
+    sa, sb = s(a), s(b)
+    ok = (sa < 0) & (sb >= 0)
+    t = t_lin.copy()
+    side = np.zeros(len(row), dtype=np.int8)  # which end moved last: -1 a, +1 b
+    for _ in range(steps):
+        t = np.where(ok, a - sa * (b - a) / np.where(sb != sa, sb - sa, 1.0), t)
+        st = s(t)
+        left = st < 0
+        # Illinois: when the same end moves twice, halve the other end's value
+        sb = np.where(left & (side == -1), 0.5 * sb, sb)
+        sa = np.where(~left & (side == 1), 0.5 * sa, sa)
+        a, sa = np.where(left, t, a), np.where(left, st, sa)
+        b, sb = np.where(left, b, t), np.where(left, sb, st)
+        side = np.where(left, -1, 1).astype(np.int8)
+    return np.where(ok, t, t_lin)
+
+
+def _apply_holdoff(row, t_a, t_star, holdoff, first_stop, max_stops=None):
     """Which arming crossings become stops: after a stop the discriminator is dead from t_a to
-    max(t_a, t*) + hold-off; with first_stop only the first stop of a row is kept.
+    max(t_a, t*) + hold-off; a row records at most ``max_stops`` stops (None: no limit); with
+    first_stop only the first stop of a row is kept (``max_stops = 1``).
 
     row, t_a sorted by (row, t_a). Returns accepted (bool)."""
     m = len(row)
@@ -200,20 +259,23 @@ def _apply_holdoff(row, t_a, t_star, holdoff, first_stop):
     first[1:] = row[1:] != row[:-1]
     start = np.flatnonzero(first)
     rank = np.arange(m) - np.repeat(start, np.diff(np.append(start, m)))
-    if first_stop:
+    if first_stop or max_stops == 1:
         accepted[start] = True
         return accepted
+    limit = np.inf if max_stops is None else int(max_stops)
     dead_until = np.full(int(row.max()) + 1, -np.inf)
+    count = np.zeros(int(row.max()) + 1, dtype=np.int64)
     order = np.argsort(rank, kind="stable")
     bounds = np.cumsum(np.bincount(rank))
     lo = 0
     for hi in bounds:
         sel = order[lo:hi]
         lo = hi
-        ok = t_a[sel] >= dead_until[row[sel]]
+        ok = (t_a[sel] >= dead_until[row[sel]]) & (count[row[sel]] < limit)
         sel = sel[ok]
         accepted[sel] = True
         dead_until[row[sel]] = np.maximum(t_a[sel], t_star[sel]) + holdoff
+        count[row[sel]] += 1
     return accepted
 
 
@@ -226,6 +288,7 @@ def discriminate(
     *,
     holdoff_s: float = 0.0,
     first_stop: bool = False,
+    max_stops: int | None = None,
     t0_s=0.0,
     x_padded_a=None,
     band: BandLimit | None = None,
@@ -236,7 +299,8 @@ def discriminate(
     at the last upward zero crossing of ``s(t) = y(t - t_d) - cfd_fraction y(t)`` in
     ``[t_a - t_d, t_pk + t_d]``, t_pk the first local maximum of y after t_a. Every arming
     crossing is a stop unless it falls in the dead time of the previous stop (from its t_a to
-    ``max(t_a, t*) + holdoff_s``); ``first_stop`` keeps only the first stop of each waveform.
+    ``max(t_a, t*) + holdoff_s``) or the waveform already has ``max_stops`` stops;
+    ``first_stop`` keeps only the first stop of each waveform (``max_stops = 1``).
 
     Parameters
     ----------
@@ -246,6 +310,7 @@ def discriminate(
     t_d_s, cfd_fraction : float -- CFD delay [s] and attenuation [1] (Eq. 19)
     holdoff_s : float -- re-arm hold-off after a stop [s] (the gate simulation uses one FWHM)
     first_stop : bool -- keep only each waveform's first stop
+    max_stops : int, optional -- at most this many stops per waveform (None: no limit)
     t0_s : float or (n,) float -- time of each row's sample 0 [s]
     x_padded_a : (n, L + 2 m) float, optional -- the input of h_B (signal + white noise) that
         made ``y_a``; with ``band`` the arming is continuous-time (between-sample excursions
@@ -269,31 +334,44 @@ def discriminate(
     jpk = _first_local_max(y, row, j)
     t_d = t_d_s / dt_s
     t_star, fired = _cfd_stop(y, row, t_a, jpk, t_d, cfd_fraction)
-    accepted = _apply_holdoff(row, t_a, t_star, holdoff_s / dt_s, first_stop)
+    accepted = _apply_holdoff(row, t_a, t_star, holdoff_s / dt_s, first_stop, max_stops)
     row, t_a, t_star, fired = row[accepted], t_a[accepted], t_star[accepted], fired[accepted]
     t0 = np.broadcast_to(np.asarray(t0_s, dtype=np.float64), (y.shape[0],))
     return Stops(row.astype(np.int64), t0[row] + t_star * dt_s, t0[row] + t_a * dt_s, fired)
 
 
 def reference_stop_s(
-    shape: PulseShape, band: BandLimit, t_d_s: float, cfd_fraction: float, dtype=np.float32
+    shape: PulseShape,
+    band: BandLimit,
+    t_d_s: float,
+    cfd_fraction: float,
+    dtype=np.float32,
+    n_phases: int = REFERENCE_PHASES,
 ) -> float:
     """t*_ref: the emitted pulse (t = 0 at its start, Eq. 1) sampled at j dt, band-limited by the
-    same taps and timed by the same discriminator, noise-free, armed at half its peak [s]."""
+    same taps and timed by the same discriminator, noise-free, armed at half its peak [s].
+
+    Averaged over ``n_phases`` positions of the pulse's start between two samples, (q + 1/2) dt
+    / n_phases, as echoes arrive at every phase: what sampling leaves of the crossing's error
+    (below 0.1 mm with the cubic crossing) averages out. With the sampled convolution of the
+    sampled pulse, one pulse starting on a sample was 3 mm late against the echoes at the
+    default step (its onset kink): the Monte Carlo's range bias."""
     dt = band.dt_s
     m = band.half_width
     pre = m + math.ceil(t_d_s / dt) + 4
     t_end = raw_end_s(shape) + t_d_s
-    t = dt * (np.arange(pre + math.ceil(t_end / dt) + m + 4) - pre)
-    x = np.zeros((1, len(t) + 2 * m), dtype=dtype)
-    x[0, m : m + len(t)] = shape.raw_at(t)
-    y = noisy_band_limited(None, x, None, band, noise=False)  # the echoes' own signal path
+    t = dt * (np.arange(pre + math.ceil(t_end / dt) + m + 5) - pre)
+    phase_s = dt * (np.arange(n_phases) + 0.5) / n_phases
+    x = np.zeros((n_phases, len(t) + 2 * m), dtype=dtype)
+    x[:, m : m + len(t)] = shape.raw_at(t[None, :] - phase_s[:, None])
+    # the echoes' own signal path: the band-limited pulse in closed form at the sample times
+    y = shape.filtered_at(t[None, :] - phase_s[:, None]).astype(dtype)
     stops = discriminate(
         y, dt, 0.5 * float(y.max()), t_d_s, cfd_fraction, t0_s=t[0], x_padded_a=x, band=band
     )
-    if len(stops.t_s) != 1 or not stops.fired[0]:
-        raise RuntimeError("the reference pulse did not give exactly one CFD stop")
-    return float(stops.t_s[0])
+    if len(stops.t_s) != n_phases or not stops.fired.all():
+        raise RuntimeError("the reference pulse did not give exactly one CFD stop per phase")
+    return float(np.mean(stops.t_s - phase_s[stops.row]))
 
 
 def raw_end_s(shape: PulseShape) -> float:

@@ -83,6 +83,7 @@ class _GateSetup:
     cfd_fraction: float
     holdoff_s: float
     first_stop: bool
+    max_stops: int | None
     resolution_s: float
     t_ref_s: float
     raw_end_s: float
@@ -99,21 +100,41 @@ class _GateSetup:
 def _signal_into(x: np.ndarray, setup: _GateSetup, lit: np.ndarray, local_rows: np.ndarray):
     """Write i_s = R_resp E sum_k w_k P0(t - t_k) (Eqs. 7, 29, 30) of the lit rows into the
     padded input x, on each pixel's own window (delays exact, never snapped)."""
+    _pulses_into(
+        x, setup, lit, local_rows, setup.shape.raw_at, 0.0, setup.raw_end_s, setup.band.half_width
+    )
+
+
+def _filtered_signal_into(
+    y: np.ndarray, setup: _GateSetup, lit: np.ndarray, local_rows: np.ndarray
+):
+    """Add the band-limited signal R_resp E sum_k w_k (h_B * P0)(t - t_k) of the lit rows to y
+    at its sample times, in closed form (the pulse table): exact wherever the samples fall. The
+    sampled convolution of the sampled pulse errs at the pulse's onset kink by an amount that
+    depends on the grid phase (1.3 mm rms in range at the default step)."""
+    shape = setup.shape  # the table's whole span: the pulse is below 1e-10 of its peak outside
+    t_end_s = shape.t0_s + shape.step_s * (len(shape.filtered) - 1)
+    _pulses_into(y, setup, lit, local_rows, shape.filtered_at, shape.t0_s, t_end_s, 0)
+
+
+def _pulses_into(out, setup, lit, local_rows, pulse_at, t_begin_s, t_end_s, col_offset):
+    """out[row, c] += R_resp E sum_k w_k pulse_at(t_c - t_k), t_c = t_lo + (c - col_offset) dt,
+    over each lit row's window [first arrival + t_begin_s, last arrival + t_end_s]."""
     any_weight = (setup.weights[lit] > 0).any(axis=1)
     lit, local_rows = lit[any_weight], local_rows[any_weight]
     if len(lit) == 0:
         return
-    dt, m = setup.band.dt_s, setup.band.half_width
-    width = x.shape[1]
+    dt, m = setup.band.dt_s, col_offset
+    width = out.shape[1]
     arr, w = setup.arrivals[lit], setup.weights[lit]
     has = w > 0
     t_first = np.where(has, arr, np.inf).min(axis=1)
     t_last = np.where(has, arr, -np.inf).max(axis=1)
     arr = np.where(has, arr, t_first[:, None])
     scale = setup.receiver.responsivity_a_w * setup.energy_j
-    # padded column c holds the sample at t_lo + (c - m) dt
-    c0 = np.clip(np.floor((t_first - setup.t_lo) / dt).astype(np.int64) + m, 0, width)
-    t_end = t_last + setup.raw_end_s - setup.t_lo
+    c0 = np.floor((t_first + t_begin_s - setup.t_lo) / dt).astype(np.int64) + m
+    c0 = np.clip(c0, 0, width)
+    t_end = t_last + t_end_s - setup.t_lo
     c1 = np.clip(np.ceil(t_end / dt).astype(np.int64) + m + 1, 0, width)
     n_cols = c1 - c0
     k = arr.shape[1]
@@ -123,10 +144,10 @@ def _signal_into(x: np.ndarray, setup: _GateSetup, lit: np.ndarray, local_rows: 
             continue
         cols = c0[sel, None] + np.arange(wmax)[None, :]
         t = setup.t_lo + (cols - m) * dt
-        p = np.einsum("pwk,pk->pw", setup.shape.raw_at(t[:, :, None] - arr[sel, None, :]), w[sel])
+        p = np.einsum("pwk,pk->pw", pulse_at(t[:, :, None] - arr[sel, None, :]), w[sel])
         inside = cols < c1[sel, None]
         r = np.broadcast_to(local_rows[sel, None], cols.shape)
-        x[r[inside], cols[inside]] = (scale * p[inside]).astype(x.dtype)
+        out[r[inside], cols[inside]] += (scale * p[inside]).astype(out.dtype)
 
 
 def _gate_chunk(setup: _GateSetup, p0: int, p1: int, rng: np.random.Generator):
@@ -138,7 +159,8 @@ def _gate_chunk(setup: _GateSetup, p0: int, p1: int, rng: np.random.Generator):
     lit = setup.lit_of_pixel[p0:p1]
     local = np.flatnonzero(lit >= 0)
     _signal_into(x, setup, lit[local], local)
-    y = noisy_band_limited(rng, x, setup.receiver, setup.band, setup.noise)
+    y = noisy_band_limited(rng, x, setup.receiver, setup.band, setup.noise, add_signal=False)
+    _filtered_signal_into(y, setup, lit[local], local)
     t1 = time.perf_counter()
     stops = discriminate(
         y,
@@ -148,6 +170,7 @@ def _gate_chunk(setup: _GateSetup, p0: int, p1: int, rng: np.random.Generator):
         setup.cfd_fraction,
         holdoff_s=setup.holdoff_s,
         first_stop=setup.first_stop,
+        max_stops=setup.max_stops,
         t0_s=setup.t_lo,
         x_padded_a=x if setup.continuous else None,
         band=setup.band if setup.continuous else None,
@@ -203,6 +226,7 @@ def montecarlo_gate(
     cfd_fraction: float,
     resolution_s: float,
     first_stop: bool = False,
+    max_stops: int | None = None,
     holdoff_s: float | None = None,
     noise: bool = True,
     arming: str = "continuous",
@@ -227,7 +251,9 @@ def montecarlo_gate(
     tnr : float -- V_T = tnr sigma_n
     t_d_s, cfd_fraction : float -- CFD delay [s] and fraction (Eq. 19)
     resolution_s : float -- timing resolution T_t [s] (Eq. 26)
-    first_stop : bool -- keep only each pixel's first stop
+    first_stop : bool -- keep only each pixel's first stop (``max_stops = 1``)
+    max_stops : int, optional -- each pixel records at most this many stops (None: no limit); a
+        noise stop before the echo then masks it (docs/physics.md#limited-stops)
     holdoff_s : float, optional -- re-arm hold-off; default one FWHM of the emitted pulse
     noise : bool -- False: noise-free waveforms through the same discriminator
     arming : "continuous" (an analog comparator) or "sampled" (crossings between samples only)
@@ -272,6 +298,7 @@ def montecarlo_gate(
         cfd_fraction=float(cfd_fraction),
         holdoff_s=pulse_fwhm_s(shape) if holdoff_s is None else float(holdoff_s),
         first_stop=first_stop,
+        max_stops=None if max_stops is None else int(max_stops),
         resolution_s=float(resolution_s),
         t_ref_s=t_ref,
         raw_end_s=raw_end_s(shape),
@@ -343,6 +370,7 @@ def montecarlo_detection(
     receiver_model: ReceiverModel,
     scene,
     first_stop: bool = False,
+    max_stops: int | None = None,
     **options,
 ) -> McResult:
     """The Monte Carlo detection stage for the pipeline: one flash of ``scene``.
@@ -355,6 +383,8 @@ def montecarlo_detection(
     scene : Scene -- detector.pixels, laser.pulse_energy_j, timing (tnr, resolution_s,
         cfd_fraction, range_gate_m) and gate_center_m
     first_stop : bool -- keep only each pixel's first stop (default: multi-stop)
+    max_stops : int, optional -- at most this many stops per pixel (the pipeline passes
+        ``timing.max_stops``; None: no limit)
     **options -- passed to :func:`montecarlo_gate` (holdoff_s, noise, arming, max_bytes,
         n_threads)
 
@@ -381,5 +411,6 @@ def montecarlo_detection(
         cfd_fraction=t.cfd_fraction,
         resolution_s=t.resolution_s,
         first_stop=first_stop,
+        max_stops=max_stops,
         **options,
     )

@@ -19,10 +19,13 @@ import numpy as np
 from .. import detection, timing
 from .. import receiver as apd
 from ..echo import EchoStage
+from ..pulse import A_FWHM
 from ..scene import Scene, SceneError
 from . import Detection, Receiver, Response, register
 
-MAX_OUTLIERS = 5_000_000  # false alarms drawn per flash at most (a TNR near 0 gives ~640/pixel)
+MAX_OUTLIERS = (
+    5_000_000  # false alarms per flash at most (K per pixel bounds them; 1024^2 x 16 not)
+)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -89,14 +92,22 @@ def _response_reads(s: Scene) -> tuple:
 
 def detect(scene: Scene, echo: EchoStage, rx: LmApdResponse) -> LmApdDetection:
     """Section 4 (or 5 with ``fidelity.noise_model = "montecarlo"``): detections, ranges and
-    false alarms of one flash, seeded from the scene."""
+    false alarms of one flash, seeded from the scene, each pixel recording at most
+    ``timing.max_stops`` stops (docs/physics.md#limited-stops)."""
     t = scene.timing
     rng = np.random.default_rng([scene.seed, 2024])
     threshold_a = t.tnr * rx.model.sigma_n_a
-    p_d = detection_probability(scene, rx, threshold_a)
     sigma_m = range_sigma_m(scene, echo, rx)
     r_true_m = timing.range_from_half_max_m(echo.features.t_half_s, echo.shape.t_half_s)
     n_false = false_alarms_per_pixel(scene)
+    lo, hi = gate_m(scene)
+    p_echo = detection_probability(scene, rx, threshold_a)
+    holdoff_s = stop_holdoff_s(scene, echo)
+    # the chance that noise stops used up the pixel's stops before its echo (K = 1:
+    # 1 - exp(-nu t_e)), in the detection probability
+    rate_hz = n_false / (2.0 * (hi - lo) / timing.C)
+    t_echo_s = 2.0 * (r_true_m - lo) / timing.C
+    p_d = p_echo * detection.echo_survival_probability(t_echo_s, rate_hz, t.max_stops, holdoff_s)
 
     n = len(echo.pixel)
     if scene.fidelity.noise_model == "montecarlo":
@@ -104,18 +115,18 @@ def detect(scene: Scene, echo: EchoStage, rx: LmApdResponse) -> LmApdDetection:
         # false alarms; P_d and sigma above stay the statistical model's, for comparison
         from .. import montecarlo  # noqa: PLC0415  (imported only when the MC model is asked for)
 
-        mc = montecarlo.montecarlo_detection(rng, echo, rx.model, scene)
+        mc = montecarlo.montecarlo_detection(
+            rng, echo, rx.model, scene, max_stops=t.max_stops, holdoff_s=holdoff_s
+        )
         drawn, r_meas_m, outliers = mc.detected, mc.range_m, mc.outliers
     else:  # Section 4: Eq. 27 draws the detection, Eq. 24 the range noise, Eq. 28 the outliers
-        drawn = rng.random(n) < p_d
+        drawn = rng.random(n) < p_echo
         noise = rng.standard_normal(n)
         with np.errstate(invalid="ignore"):
             r_meas_m = r_true_m + np.where(drawn, sigma_m * noise, 0.0)
-        outliers = detection.draw_outliers(
-            rng, scene.detector.pixels**2, n_false, scene.gate_center_m, t.range_gate_m
+        drawn, outliers = _limited_stops(
+            rng, scene, echo.pixel, np.where(drawn, r_meas_m, np.nan), n_false, holdoff_s
         )
-    lo = max(0.0, scene.gate_center_m - t.range_gate_m / 2.0)
-    hi = scene.gate_center_m + t.range_gate_m / 2.0
     detected = drawn & np.isfinite(r_meas_m) & (r_meas_m >= lo) & (r_meas_m <= hi)
     r_meas_m = np.where(detected, r_meas_m, np.nan)
     return LmApdDetection(
@@ -131,6 +142,49 @@ def detect(scene: Scene, echo: EchoStage, rx: LmApdResponse) -> LmApdDetection:
     )
 
 
+def gate_m(scene: Scene) -> tuple[float, float]:
+    """The range gate [max(0, R_st - R_gate / 2), R_st + R_gate / 2] [m]."""
+    half = scene.timing.range_gate_m / 2.0
+    return max(0.0, scene.gate_center_m - half), scene.gate_center_m + half
+
+
+def stop_holdoff_s(scene: Scene, echo: EchoStage) -> float:
+    """The re-arm hold-off after a stop: ``timing.rearm_holdoff_fwhm`` FWHMs of the emitted
+    pulse [s] (one by default, the Monte Carlo's)."""
+    return scene.timing.rearm_holdoff_fwhm * echo.shape.tau_s * A_FWHM / echo.shape.a
+
+
+def _limited_stops(rng, scene, echo_pixel, echo_range_m, n_false, holdoff_s):
+    """The echo stops (n,) bool and the false alarms of one pulse, at most K stops per pixel.
+
+    While the expected noise stops per pixel are at most K, every noise up-crossing is drawn as
+    Section 4 step 5 always did (Poisson count over the array, uniform pixel and range) and the
+    stops are picked from them and the echoes (so a K that never binds gives the unlimited
+    draw); above, they are drawn stop by stop (``detection.draw_limited_stops``), in memory and
+    time O(pixels x K). Both sample the same process."""
+    t = scene.timing
+    lo, hi = gate_m(scene)
+    n_pixels = scene.detector.pixels**2
+    holdoff_m = 0.5 * timing.C * holdoff_s
+    if n_false > t.max_stops:
+        rate_per_m = n_false / (hi - lo)
+        return detection.draw_limited_stops(
+            rng, n_pixels, echo_pixel, echo_range_m, rate_per_m, lo, hi, t.max_stops, holdoff_m
+        )
+    outliers = detection.draw_outliers(rng, n_pixels, n_false, scene.gate_center_m, t.range_gate_m)
+    is_echo = np.isfinite(echo_range_m) & (echo_range_m >= lo) & (echo_range_m <= hi)
+    pixel = np.concatenate([outliers.pixel, np.asarray(echo_pixel)[is_echo]])
+    range_m = np.concatenate([outliers.range_m, echo_range_m[is_echo]])
+    stop = detection.limited_stops(pixel, range_m, t.max_stops, holdoff_m)
+    n_out = len(outliers.pixel)
+    echo_stop = np.zeros(len(echo_range_m), dtype=bool)
+    echo_stop[np.flatnonzero(is_echo)[stop[n_out:]]] = True
+    keep = stop[:n_out]
+    if not keep.all():
+        outliers = detection.Outliers(pixel=outliers.pixel[keep], range_m=outliers.range_m[keep])
+    return echo_stop, outliers
+
+
 def detection_probability(scene: Scene, rx: LmApdResponse, threshold_a: float) -> np.ndarray:
     """(n,) Eq. 27, ours (the peak's own shot noise) or as printed (thermal only)."""
     if scene.uses("eq27_paper"):
@@ -139,12 +193,13 @@ def detection_probability(scene: Scene, rx: LmApdResponse, threshold_a: float) -
 
 
 def range_sigma_m(scene: Scene, echo: EchoStage, rx: LmApdResponse) -> np.ndarray:
-    """(n,) Eq. 24: the CFD jitter (Eq. 25, ours or as printed) with the quantisation (Eq. 26)."""
+    """(n,) Eq. 24: the CFD jitter (Eq. 25: ours, each sample with its own noise; or the paper
+    forms ``eq25_equal_noise``, ``eq25_risetime``) with the quantisation (Eq. 26)."""
     t = scene.timing
     if scene.uses("eq25_risetime"):
         rise_s = timing.rise_time_10_90_s(echo.shape)
         s_cfd_m = timing.sigma_cfd_paper_m(rx.snr, t.cfd_fraction, rise_s)
-    else:
+    elif scene.uses("eq25_equal_noise"):
         s_cfd_m = timing.sigma_cfd_m(
             rx.snr,
             echo.features.cfd_slope_per_s,
@@ -152,22 +207,44 @@ def range_sigma_m(scene: Scene, echo: EchoStage, rx: LmApdResponse) -> np.ndarra
             echo.cfd_delay_s,
             echo.shape.sigma_h_s,
         )
+    else:
+        s_cfd_m = sigma_cfd_per_sample_m(scene, echo, rx)
     return timing.range_sigma_m(s_cfd_m, timing.sigma_quantisation_m(t.resolution_s))
 
 
+def sigma_cfd_per_sample_m(scene: Scene, echo: EchoStage, rx: LmApdResponse) -> np.ndarray:
+    """(n,) Eq. 25 (ours): each CFD sample with the shot noise of its own signal current
+    (Eq. 10) besides the dark and thermal noise, through the chain, and their covariance from
+    the current midway between them (``EchoFeatures.cfd_shot_level``). With a saturation
+    (``detector.snr_max``) the jitter is at least the equal-noise form's at that SNR."""
+    i_pk_a = rx.model.responsivity_a_w * rx.peak_power_w  # the band-limited peak
+    level = echo.features.cfd_shot_level
+    delayed_a, prompt_a, mid_a = (rx.model.sigma_peak_a(i_pk_a * level[:, j]) for j in range(3))
+    args = (scene.timing.cfd_fraction, echo.cfd_delay_s, echo.shape.sigma_h_s)
+    slope = echo.features.cfd_slope_per_s
+    sigma_m = timing.sigma_cfd_per_sample_m(
+        i_pk_a, delayed_a, prompt_a, slope, *args, sigma_mid_a=mid_a
+    )
+    if np.isfinite(rx.model.snr_max):
+        sigma_m = np.maximum(sigma_m, timing.sigma_cfd_m(rx.model.snr_max, slope, *args))
+    return sigma_m
+
+
 def false_alarms_per_pixel(scene: Scene) -> float:
-    """Eq. 28 (Rice, or as printed) over the gate; refused above MAX_OUTLIERS per flash."""
+    """Eq. 28 (Rice, or as printed) over the gate: the expected noise up-crossings per pixel.
+    Refused where the stops they give, at most K per pixel, exceed MAX_OUTLIERS per flash."""
     t, bandwidth_hz = scene.timing, scene.detector.bandwidth_hz
     if scene.uses("eq28_paper"):
         n_false = detection.false_alarms_per_pixel_paper(t.tnr, t.range_gate_m, bandwidth_hz)
     else:
         n_false = detection.false_alarms_per_pixel(t.tnr, t.range_gate_m, bandwidth_hz)
-    expected = n_false * scene.detector.pixels**2
+    expected = min(n_false, t.max_stops) * scene.detector.pixels**2
     if expected > MAX_OUTLIERS:
         raise SceneError(
-            f"timing.tnr = {t.tnr:g} gives {expected:.3g} expected false alarms per flash over "
-            f"the {t.range_gate_m:g} m gate, more than the {MAX_OUTLIERS:,} this simulator draws; "
-            "raise the TNR or shorten timing.range_gate_m"
+            f"timing.max_stops = {t.max_stops} at timing.tnr = {t.tnr:g} gives about "
+            f"{expected:.3g} false alarms per flash over the {t.range_gate_m:g} m gate, more than "
+            f"the {MAX_OUTLIERS:,} this simulator draws; lower timing.max_stops, raise the TNR "
+            "or shorten timing.range_gate_m"
         )
     return n_false
 
@@ -180,7 +257,7 @@ def _detection_reads(s: Scene) -> tuple:
         s.gate_center_m,
         s.detector.pixels,
         s.detector.bandwidth_hz,
-        tuple(s.uses(f) for f in ("eq25_risetime", "eq27_paper", "eq28_paper")),
+        tuple(s.uses(f) for f in ("eq25_risetime", "eq25_equal_noise", "eq27_paper", "eq28_paper")),
     )
 
 

@@ -696,8 +696,6 @@ def _to_plain(obj, inf_as_text: bool = True):
         out = {}
         for f in dataclasses.fields(obj):
             v = getattr(obj, f.name)
-            if f.name == "receiver" and v == ReceiverSelection():
-                continue  # the default receiver: written as before the key existed
             out[f.name] = dict(v) if f.name == "materials" else _to_plain(v, inf_as_text)
         return out
     if isinstance(obj, tuple):

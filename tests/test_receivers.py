@@ -38,7 +38,7 @@ def test_a_registered_receiver_is_a_valid_kind_and_listed_in_the_key_reference(i
     assert row["valid"] == "lm_apd / ideal"
     scene = simcore.with_overrides(simcore.Scene(), {"receiver.kind": KIND})
     assert scene.to_dict()["receiver"] == {"kind": KIND}
-    assert "receiver" not in simcore.Scene().to_dict()  # the default: as before the key existed
+    assert simcore.Scene().to_dict()["receiver"] == {"kind": "lm_apd"}  # every key, default too
 
 
 def test_the_ideal_receiver_runs_through_the_pipeline(ideal, plate_scene):

@@ -4,8 +4,12 @@ For fixed seeds, the ``lmapd`` commands' outputs of a few scenes (the paper scen
 with the interactive preset, the waveform Monte Carlo, two fly-around frames) are reduced to a
 fingerprint: the summary without its timings, the SHA-256 of every point-cloud file and of every
 array in the waveform file (with its dtype and shape). The fingerprints were written by this file
-on main at 60a3e29, before the code was reorganised ("One house"); any change of a point, a range,
-a waveform sample or a summary figure fails here.
+on main at 60a3e29, before the code was reorganised ("One house"), and the reorganisation kept them
+bit for bit. They were written again once, on purpose, for the receiver's new physics (Eq. 25 per
+sample, first-stop readout, n_dropped over lit pixels, the Monte Carlo's bias removed) and the
+summary's receiver.kind; with the old forms selected the old outputs are reproduced
+(tests/test_stops.py). Any change of a point, a range, a waveform sample or a summary figure fails
+here.
 
 Regenerate only for a change that is meant to alter results, and say so in its commit:
 

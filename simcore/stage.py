@@ -4,7 +4,7 @@ Each stage module declares its stage with a :class:`Stage` record: its name, the
 outputs it takes, the scene values it reads and the function that computes it. The pipeline
 (``simcore.pipeline``) caches each stage's output under its declared reads plus its upstream
 stages' keys, so a stage that forgets a value it reads serves a stale output when only that value
-changes (``tests/test_cache_keys.py`` changes every scene key to catch that).
+changes (``tests/core/test_cache_keys.py`` changes every scene key to catch that).
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 
 import pytest
-from mesh_files import write_plates
+from support.mesh_files import write_plates
 
 import simcore
 

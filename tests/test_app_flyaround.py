@@ -9,9 +9,9 @@ import threading
 
 import numpy as np
 import pytest
-from app_helpers import ANYTHING, change, settle
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from support.app_helpers import ANYTHING, change, settle
 
 import simcore
 from app.engine import Engine

@@ -14,7 +14,7 @@ import urllib.request
 import aiohttp
 import msgpack
 import pytest
-from hostile_client import Client, connect
+from support.hostile_client import Client, connect
 
 from app.launch import app_process
 from app.security import MAX_MESSAGE_BYTES, Limits

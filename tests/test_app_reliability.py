@@ -20,7 +20,7 @@ import msgpack
 import numpy as np
 import pytest
 import trimesh
-from app_helpers import change, settle
+from support.app_helpers import change, settle
 
 import simcore
 from app.engine import Engine

@@ -9,7 +9,7 @@ import threading
 import time
 
 import pytest
-from app_helpers import change, settle
+from support.app_helpers import change, settle
 
 import simcore
 from app.engine import Engine

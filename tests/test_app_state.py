@@ -6,9 +6,9 @@ from __future__ import annotations
 import math
 
 import pytest
-from app_helpers import ANYTHING
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from support.app_helpers import ANYTHING
 
 import simcore
 from app.logic.scene_map import resolved_materials, scene_from_controls, scene_overrides

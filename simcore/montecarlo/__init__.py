@@ -23,7 +23,7 @@ same ``x_i``. A comparator that looks at the samples only misses them and counts
 9 % (TNR 6) fewer false alarms than the Rice rate at the default step (``arming="sampled"``
 reproduces that; the exact count of sampled up-crossings is in the tests).
 
-Where it differs from the statistical model (measured in tests/test_montecarlo.py and
+Where it differs from the statistical model (measured in tests/core/test_montecarlo.py and
 scripts/plot_mc_agreement.py):
 
 - P_d: Eq. 27 is a single look at the peak. The discriminator also arms on noise inside the

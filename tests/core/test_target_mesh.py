@@ -17,7 +17,7 @@ import simcore
 from simcore.scene import Target
 from simcore.target import _resolve, mesh_geometry
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def trimesh_reference(target: Target, scale: float | None = None) -> trimesh.Trimesh:

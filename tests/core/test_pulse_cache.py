@@ -14,7 +14,7 @@ import pytest
 from simcore import pulse
 from simcore.cache import CACHE_ENV
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 PAPER_PULSE = (5e-9, pulse.A_FWHM, 120e6)  # tau [s], Eq. 1's a, bandwidth [Hz]
 
 

@@ -6,7 +6,7 @@ import os
 
 import numpy as np
 import pytest
-from mesh_files import write_plates
+from support.mesh_files import write_plates
 
 import simcore
 from simcore import target as target_module

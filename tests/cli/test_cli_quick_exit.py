@@ -9,7 +9,7 @@ from pathlib import Path
 
 from simcore.io import read_cloud
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def lmapd(*argv: str) -> subprocess.CompletedProcess:

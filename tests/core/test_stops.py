@@ -228,7 +228,7 @@ def single_surface(snrs, n_each, rng, range_m=(498.0, 502.0)):
 def test_the_monte_carlo_keeps_k_stops_and_its_masking_is_the_statistical_one():
     """First stop at TNR 3, the echo 250 m into the gate: noise fires first with probability
     1 - exp(-nu t_e). The MC's noise crossings follow Rice's rate (3 % at TNR 3 at most,
-    tests/test_montecarlo.py); its detection window opens tau before the echo."""
+    tests/core/test_montecarlo.py); its detection window opens tau before the echo."""
     n, tnr = 3000, 3.0
     arrivals, weights, _, _ = single_surface([100.0], n, np.random.default_rng(7), (599, 601))
     res = montecarlo.scene_gate(

@@ -8,12 +8,12 @@ on main at 60a3e29, before the code was reorganised ("One house"), and the reorg
 bit for bit. They were written again once, on purpose, for the receiver's new physics (Eq. 25 per
 sample, first-stop readout, n_dropped over lit pixels, the Monte Carlo's bias removed) and the
 summary's receiver.kind; with the old forms selected the old outputs are reproduced
-(tests/test_stops.py). Any change of a point, a range, a waveform sample or a summary figure fails
-here.
+(tests/core/test_stops.py). Any change of a point, a range, a waveform sample or a summary
+figure fails here.
 
 Regenerate only for a change that is meant to alter results, and say so in its commit:
 
-    .venv/bin/python tests/test_golden.py --write
+    .venv/bin/python tests/cli/test_golden.py --write
 """
 
 from __future__ import annotations
@@ -131,7 +131,7 @@ if __name__ == "__main__":
     import tempfile
 
     if sys.argv[1:] != ["--write"]:
-        sys.exit("usage: python tests/test_golden.py --write")
+        sys.exit("usage: python tests/cli/test_golden.py --write")
     prints = {}
     for name in sorted(CASES):
         with tempfile.TemporaryDirectory() as d:

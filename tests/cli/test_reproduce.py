@@ -26,7 +26,7 @@ pytestmark = pytest.mark.slow  # two quick runs, ~8 s each
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 SEED = 3
-DOC = Path(__file__).resolve().parent.parent / "docs" / "reproduction.md"
+DOC = Path(__file__).resolve().parents[2] / "docs" / "reproduction.md"
 ITEM_KEYS = {
     "brdf": {"angle_deg", "brdf_per_sr", "parameters"},
     "detection": {"p_detect", "false_alarms", "gate_m", "paper_df_hz", "sigma_n_a"},

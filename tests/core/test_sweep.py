@@ -38,7 +38,7 @@ from simcore.sweep import (
     sweep_from_dict,
 )
 
-EXAMPLE = Path(__file__).resolve().parent.parent / "assets" / "sweeps" / "example.toml"
+EXAMPLE = Path(__file__).resolve().parents[2] / "assets" / "sweeps" / "example.toml"
 FAST = {"pixels": 32, "fidelity.subrays": 1}
 WALL_TIME = ["frame_s"]  # the only column that may differ between two runs of the same frames
 

@@ -1,5 +1,5 @@
 """A test-only receiver: ideal and noiseless. Not shipped: it proves that a receiver is one module
-and one registration (tests/test_receivers.py, tests/test_cache_keys.py register it)."""
+and one registration (tests/core/test_receivers.py, tests/core/test_cache_keys.py register it)."""
 
 from __future__ import annotations
 

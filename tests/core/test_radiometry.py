@@ -77,7 +77,7 @@ def test_pixel_count_of_a_resolved_plate_falls_as_one_over_r_squared(plate_scene
     From 200 m on, the whole 4 m plate lies inside the 30 mrad illuminated disc. The receiver
     records every stop without dead time (K = 16, no hold-off): with the default first stop,
     noise before the echo masks about 1e-3 of the pixels at TNR 5 over the 1 km gate
-    (tests/test_stops.py covers that)."""
+    (tests/core/test_stops.py covers that)."""
     unlimited = {"timing.max_stops": 16, "timing.rearm_holdoff_fwhm": 0.0}
     scene = plate_scene(size_m=4.0, distance_m=distance_m, pixels=256, **unlimited)
     res = simcore.Pipeline().run(scene)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
-from ideal_receiver import IDEAL, KIND
+from support.ideal_receiver import IDEAL, KIND
 
 import simcore
 from simcore import receivers

@@ -1,6 +1,6 @@
 """The receiver interface: a receiver is one module and one registration. A test-only ideal,
-noiseless receiver (tests/ideal_receiver.py) runs through the pipeline, the CLI summary and the
-app's stats with no other edit to simcore or app."""
+noiseless receiver (tests/support/ideal_receiver.py) runs through the pipeline, the CLI summary
+and the app's stats with no other edit to simcore or app."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import json
 
 import numpy as np
 import pytest
-from ideal_receiver import IDEAL, KIND, THRESHOLD_W
+from support.ideal_receiver import IDEAL, KIND, THRESHOLD_W
 
 import simcore
 from simcore import io, receivers

@@ -115,11 +115,6 @@ def test_no_module_of_simcore_imports_itself_through_a_circle():
     assert cycles(import_graph("simcore")) == []
 
 
-@pytest.mark.xfail(
-    strict=False,
-    reason="app/logic/controller.py <-> app/logic/flyaround.py: being removed on another branch "
-    "(issue 14, item 5); drop this mark once it is merged",
-)
 def test_no_module_of_the_app_imports_itself_through_a_circle():
     assert cycles(import_graph("app")) == []
 

@@ -74,7 +74,12 @@ class AppLogic:
         )
         self._init_state(startup_messages)
         self.state.change(*STATE_KEYS)(self.on_controls_change)
-        self.flyaround = FlyaroundLogic(self)  # mode, time slider, play (its own state)
+        self.flyaround = FlyaroundLogic(  # mode, time slider, play (its own state)
+            self.state,
+            fov_rad=self.base_scene.receive.fov_rad,
+            runner=self.runner,
+            resubmit=self.on_controls_change,
+        )
         server.trigger("pixel_click")(self.on_pixel_click)
         server.trigger("frame_shown")(self.on_frame_shown)
         server.trigger("reset_controls")(self.reset_controls)

@@ -17,15 +17,12 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 import simcore
 from simcore import orbit
-
-if TYPE_CHECKING:
-    from app.logic.controller import AppLogic
 
 MODES = ("single", "flyaround")
 INTERVAL_S = 300.0  # the paper's imaging interval
@@ -163,20 +160,28 @@ class Player:
 
 
 class FlyaroundLogic:
-    """The fly-around mode on a trame state, driving ``AppLogic``.
+    """The fly-around mode on a trame state: a child of the app's logic, which it never calls.
 
-    The controller calls ``apply`` on every scene it builds and ``on_frame_shown`` when the page
-    reports a frame drawn; everything else (state, handlers, play timer) lives here.
+    The parent calls ``apply`` on every scene it builds and ``on_frame_shown`` when the page
+    reports a frame drawn; everything else (state, handlers, play timer) lives here. What the
+    child needs of the parent comes in as arguments: the trame state, the array's field of view,
+    the runner (is a frame computing, which generation is newest) and ``resubmit``, the callback
+    that makes the parent compute the scene again.
     """
 
     def __init__(
         self,
-        logic: AppLogic,
+        state,
+        fov_rad: float,
+        runner,
+        resubmit: Callable[[], Any],
         poses: FlyaroundPoses | None = None,
         player: Player | None = None,
     ):
-        self.logic = logic
-        self.state = logic.state
+        self.state = state
+        self.fov_rad = fov_rad
+        self.runner = runner
+        self.resubmit = resubmit
         self.poses = poses or FlyaroundPoses()
         self.player = player or Player()
         self.controls = FlyaroundControls()
@@ -210,8 +215,7 @@ class FlyaroundLogic:
         )
 
     def _readout(self) -> dict[str, str]:
-        fov_rad = self.logic.base_scene.receive.fov_rad
-        return self.poses.readout(self.controls.t_s, self.controls.j2, fov_rad)
+        return self.poses.readout(self.controls.t_s, self.controls.j2, self.fov_rad)
 
     # -- state handlers --------------------------------------------------------------------------
     def on_change(self, **_: Any) -> None:
@@ -229,7 +233,7 @@ class FlyaroundLogic:
         if raw["j2"] is not controls.j2:
             fixed["fly_j2"] = controls.j2
         if controls == self.controls and not fixed:
-            return  # e.g. the first call at server start: AppLogic submits the first frame
+            return  # e.g. the first call at server start: the parent submits the first frame
         changed = controls != self.controls
         was_active = self.active
         self.controls = controls
@@ -239,7 +243,7 @@ class FlyaroundLogic:
             fixed["fly_playing"] = False
         self.state.update(fixed)
         if changed and (self.active or was_active):
-            self.logic.on_controls_change()
+            self.resubmit()
 
     def on_playing_change(self, fly_playing: Any = False, **_: Any) -> None:
         """The play/pause button."""
@@ -261,7 +265,7 @@ class FlyaroundLogic:
     # -- playing ---------------------------------------------------------------------------------
     def frame_drawn(self) -> bool:
         """The frame of the newest request is on the page and drawn (nothing newer computing)."""
-        runner = self.logic.runner
+        runner = self.runner
         return (
             not runner.busy
             and self.state.frame_generation == runner.generation
@@ -273,7 +277,7 @@ class FlyaroundLogic:
         """Step to the next frame time if one is due; else schedule the next check."""
         if not (self.player.playing and self.active):
             return
-        if not self.logic.runner.busy and self.state.error_message:
+        if not self.runner.busy and self.state.error_message:
             self.player.pause()  # the frame failed: stop rather than skip over it
             self.state.fly_playing = False
             return

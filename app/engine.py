@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 import simcore
-from app.logic import views
+from app.payloads import views
 from app.runner import StaleRequest
 from app.state import MAX_SELECTED_PIXELS
 

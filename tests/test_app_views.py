@@ -14,7 +14,7 @@ from PIL import Image
 
 import simcore
 from app.engine import Engine, Request
-from app.logic import encode, views
+from app.payloads import encode, views
 
 
 @pytest.fixture(scope="module")

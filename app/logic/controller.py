@@ -17,9 +17,9 @@ from typing import Any
 
 import simcore
 from app.engine import Engine, Frame, Request, selection_tuple
-from app.logic import views
 from app.logic.flyaround import FlyaroundLogic
 from app.logic.scene_map import resolved_materials, scene_from_controls
+from app.payloads import views
 from app.runner import Outcome, Runner
 from app.state import (
     MAX_SELECTED_PIXELS,

@@ -12,13 +12,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import constants
 
 import simcore
-from app.logic import encode
+from app.payloads import encode
+from simcore.constants import C as C_M_S
 from simcore.geometry import front_view_rotation
-
-C_M_S = constants.c
 
 # Material colours of the 3D scene (library names); hidden facets are grey.
 MATERIAL_COLORS = {

@@ -20,10 +20,10 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))  # the drivers: support.*
 
 from playwright.sync_api import sync_playwright  # noqa: E402
-
-from app.launch import (  # noqa: E402
+from support.launch import (  # noqa: E402
     CHROMIUM_ARGS,
     CHROMIUM_PATH,
     JS_STATE,
@@ -33,6 +33,7 @@ from app.launch import (  # noqa: E402
     wait_first_frame,
     wait_settled,
 )
+
 from app.state import SPECS  # noqa: E402
 
 DISTANCES_M = (420.0, 600.0)

@@ -8,8 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-
-from app.launch import CHROMIUM_ARGS, CHROMIUM_PATH, app_server, chromium_missing_message
+from support.launch import CHROMIUM_ARGS, CHROMIUM_PATH, app_server, chromium_missing_message
 
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
 

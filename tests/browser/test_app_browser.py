@@ -9,9 +9,9 @@ import io
 import numpy as np
 import pytest
 from PIL import Image
+from support.launch import JS_STATE, set_field, wait_first_frame, wait_settled
 
 import simcore
-from app.launch import JS_STATE, set_field, wait_first_frame, wait_settled
 from app.ui.views3d import BACKGROUND_RGB
 
 pytestmark = pytest.mark.browser

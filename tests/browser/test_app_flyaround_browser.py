@@ -6,8 +6,7 @@ drawn before the next time is set."""
 from __future__ import annotations
 
 import pytest
-
-from app.launch import JS_STATE, app_server, wait_first_frame, wait_settled
+from support.launch import JS_STATE, app_server, wait_first_frame, wait_settled
 
 pytestmark = pytest.mark.browser
 

@@ -9,8 +9,7 @@ import threading
 from urllib.parse import urlsplit
 
 import pytest
-
-from app.launch import free_port, wait_first_frame
+from support.launch import free_port, wait_first_frame
 
 pytestmark = pytest.mark.browser
 

@@ -1,6 +1,7 @@
 """Soak test in real headless Chromium: 300 rapid changes across all sliders leave the server
 alive, its memory grown by less than 100 MB, and the view showing the final state's result; two
-clients at once both see correct results (app.soak does the work; scripts/soak_app.py prints it).
+clients at once both see correct results (tests/support/soak.py does the work; scripts/soak_app.py
+prints it).
 
 The work is bounded (300 changes, then two client changes), not the wall time: this shared 2-core
 machine drifts by 2x between spells, so the elapsed time is reported (soak.txt, and in the test's
@@ -10,8 +11,7 @@ limit."""
 from __future__ import annotations
 
 import pytest
-
-from app.soak import run_soak
+from support.soak import run_soak
 
 pytestmark = pytest.mark.browser
 

@@ -6,8 +6,7 @@ from __future__ import annotations
 
 import pytest
 import trimesh
-
-from app.launch import JS_STATE, wait_first_frame, wait_settled
+from support.launch import JS_STATE, wait_first_frame, wait_settled
 
 pytestmark = pytest.mark.browser
 

@@ -15,7 +15,7 @@ import aiohttp
 import msgpack
 from wslink.chunking import UnChunker, _encode_header, generate_chunks
 
-from app.launch import RunningApp
+from support.launch import RunningApp
 
 WAIT_S = 60.0
 CHUNK = 4 * 2**20

@@ -18,7 +18,7 @@ import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
 
-REPO_DIR = Path(__file__).resolve().parent.parent
+REPO_DIR = Path(__file__).resolve().parents[2]
 CHROMIUM_PATH = os.environ.get("LMAPD_CHROMIUM", "/usr/bin/chromium")
 # Debian's Chromium, headless, WebGL on SwiftShader (docs: STACK.md); never `playwright install`.
 CHROMIUM_ARGS = [

@@ -21,10 +21,10 @@ import numpy as np
 import pytest
 import trimesh
 from support.app_helpers import change, settle
+from support.launch import app_server
 
 import simcore
 from app.engine import Engine
-from app.launch import app_server
 from app.logic import upload as upload_mod
 from app.main import LmapdApp
 from app.runner import Runner

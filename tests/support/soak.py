@@ -16,9 +16,9 @@ from pathlib import Path
 from urllib.parse import urlsplit
 
 import simcore
-from app.launch import JS_FRAMES, JS_STATE, set_field, wait_first_frame, wait_settled
 from app.logic.scene_map import scene_from_controls
 from app.state import SPECS, STATE_KEYS, Controls, sanitize_controls
+from support.launch import JS_FRAMES, JS_STATE, set_field, wait_first_frame, wait_settled
 
 SLIDERS = tuple(key for key in SPECS if key != "seed")  # the seed has a field, no slider
 # keys pressed on the sliders' thumbs

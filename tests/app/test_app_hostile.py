@@ -15,10 +15,10 @@ import aiohttp
 import msgpack
 import pytest
 from support.hostile_client import Client, connect
+from support.launch import app_process
+from support.soak import rss_mb
 
-from app.launch import app_process
 from app.security import MAX_MESSAGE_BYTES, Limits
-from app.soak import rss_mb
 
 pytestmark = pytest.mark.slow
 

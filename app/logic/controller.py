@@ -11,6 +11,7 @@ only the newest of them kept, so a slow browser never builds a queue of stale fr
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import math
 import time
 from typing import Any
@@ -158,6 +159,16 @@ class AppLogic:
         )
         self.state.busy = True
         return self.runner.submit(request)
+
+    def switch_target(self, scene: simcore.Scene, engine: Engine, initial_controls) -> None:
+        """Compute on another target from now on: its base scene and engine, the controls a
+        reset returns to, the current controls with its parts' materials; its facets are drawn
+        anew with the next frame (the caller then asks for one)."""
+        self.base_scene = scene
+        self.engine = engine
+        self.initial_controls = initial_controls
+        self.controls = dataclasses.replace(self.controls, materials=initial_controls.materials)
+        self._applied_faces_key = None
 
     def reset_controls(self, *_: Any, **__: Any) -> None:
         """Back to the scene the app started with (the paper scene unless --scene was given)."""

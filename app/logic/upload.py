@@ -318,11 +318,11 @@ class TargetUploads:
         self.current = target
         model = target.engine.model
         materials = resolved_materials(model, target.scene)
-        logic.base_scene = target.scene
-        logic.engine = target.engine
-        logic.initial_controls = dataclasses.replace(self.builtin_initial, materials=materials)
-        logic.controls = dataclasses.replace(logic.controls, materials=materials)
-        logic._applied_faces_key = None
+        logic.switch_target(
+            target.scene,
+            target.engine,
+            dataclasses.replace(self.builtin_initial, materials=materials),
+        )
         geometry = target.engine.target_geometry()
         with self.state:
             self.state.update(

@@ -17,13 +17,13 @@ import time
 from typing import Any
 
 import simcore
-from app.engine import Engine, Frame, Request, selection_tuple
+from app.engine import Engine, Frame, Request
 from app.logic.flyaround import FlyaroundLogic
 from app.logic.scene_map import resolved_materials, scene_from_controls
+from app.logic.selection import PixelSelection
 from app.payloads import views
 from app.runner import Outcome, Runner
 from app.state import (
-    MAX_SELECTED_PIXELS,
     STATE_KEYS,
     controls_from_scene,
     sanitize_controls,
@@ -69,7 +69,7 @@ class AppLogic:
         self._inflight: dict[str, float] = {}  # frame key -> time pushed, not yet drawn
         self._held: Outcome[Frame] | None = None
         self._pushed_generation = 0  # generation of the frame the page shows
-        self._selection_pixels = 0
+        self.selection = PixelSelection(self.state)  # the waveform chart's pixels
         self.runner: Runner[Request, Frame] = Runner(
             self._compute, self._deliver, debounce_s=debounce_s
         )
@@ -154,8 +154,8 @@ class AppLogic:
             scene=scene,
             color_by=self.controls.color_by,
             image_kind=self.controls.image_kind,
-            selection=selection_tuple(self.state.selected_pixels or []),
-            selection_pixels=self._selection_pixels,
+            selection=self.selection.current(),
+            selection_pixels=self.selection.array_pixels,
         )
         self.state.busy = True
         return self.runner.submit(request)
@@ -255,7 +255,7 @@ class AppLogic:
         key = f"g{outcome.generation}"
         total_s = time.perf_counter() - outcome.submitted_at_s
         cloud = frame.cloud
-        selection, waveforms = self._selection_now(frame)
+        selection, waveforms = self.selection.for_frame(frame)
         update = {
             "frustum": frame.frustum,
             "cloud_points": cloud["points"],
@@ -284,7 +284,7 @@ class AppLogic:
             self._applied_faces_key = frame.faces_key
         self.last_frame = frame
         self._pushed_generation = outcome.generation
-        self._selection_pixels = frame.result.pixels
+        self.selection.shown(frame)
         self._inflight[key] = time.perf_counter()
         self._held = None  # anything still waiting is older than this frame
         self.n_frames_pushed += 1
@@ -294,36 +294,11 @@ class AppLogic:
             self.state.busy = not self.runner.is_current(outcome.generation) or bool(self._held)
 
     # -- pixel selection --------------------------------------------------------------------------
-    def _selection_now(self, frame: Frame) -> tuple[list[list[int]], dict]:
-        """The frame's selection and waveforms, unless the user clicked pixels of the same array
-        while it was computed: then those, with their waveforms from this frame."""
-        current = selection_tuple(self.state.selected_pixels or [])
-        asked = frame.request.selection if frame.request else current
-        n = frame.result.pixels
-        if current == asked or not current or self._selection_pixels != n:
-            return frame.selection, frame.waveforms
-        pixels = [[r, c] for r, c in current if 0 <= r < n and 0 <= c < n]
-        return pixels, views.waveform_figure(frame.result, pixels)
-
     def on_pixel_click(
         self, row: Any = None, col: Any = None, add: Any = False, *_: Any, **__: Any
     ) -> None:
         """Click on the array image: select pixel (row, col); with shift, add/remove it."""
-        frame = self.last_frame
-        if frame is None:
-            return
-        n = frame.result.pixels
-        try:
-            r, c = int(row), int(col)
-        except (TypeError, ValueError, OverflowError):  # inf, NaN, "x", [1]
-            return
-        if not (0 <= r < n and 0 <= c < n):
-            return
-        current = [list(p) for p in selection_tuple(self.state.selected_pixels or [])]
-        selection = views.toggle_pixel(current, [r, c], bool(add), MAX_SELECTED_PIXELS)
-        with self.state:
-            self.state.selected_pixels = selection
-            self.state.waveforms = views.waveform_figure(frame.result, selection)
+        self.selection.click(self.last_frame, row, col, add)
 
 
 def _same(a: Any, b: Any) -> bool:

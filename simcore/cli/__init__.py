@@ -60,23 +60,22 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args)
     except KeyboardInterrupt:
-        print("lmapd: interrupted", file=sys.stderr)
+        say("lmapd: interrupted", error=True)
         return 130
     except Exception as exc:
         if isinstance(exc, _user_errors()):
-            print(f"lmapd: error: {one_line(str(exc))}", file=sys.stderr)
+            say(f"lmapd: error: {one_line(str(exc))}", error=True)
             return EXIT_USAGE
         if isinstance(exc, OSError) and exc.strerror:  # the system refused a file: name it
             where = f"{exc.filename}: " if exc.filename is not None else ""
-            print(f"lmapd: error: {one_line(where + exc.strerror)}", file=sys.stderr)
+            say(f"lmapd: error: {one_line(where + exc.strerror)}", error=True)
             return EXIT_USAGE
         if os.environ.get("LMAPD_DEBUG"):  # a bug, not the user's input: one line, or the trace
             raise
-        print(
+        say(
             f"lmapd: internal error: {type(exc).__name__}: {one_line(str(exc))} (a bug: please "
-            "report it; "
-            "LMAPD_DEBUG=1 shows the traceback)",
-            file=sys.stderr,
+            "report it; LMAPD_DEBUG=1 shows the traceback)",
+            error=True,
         )
         return 1
 

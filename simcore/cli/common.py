@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -21,9 +22,9 @@ class CliError(Exception):
     """A user error: printed as one line, exit status 2."""
 
 
-def say(text: str) -> None:
-    """Command output on stdout: the one place the subcommands' handlers write from."""
-    print(text)
+def say(text: str, error: bool = False) -> None:
+    """Command output: the one place the commands write from (stdout; stderr for ``error``)."""
+    print(text, file=sys.stderr if error else sys.stdout)
 
 
 def add_scene_argument(parser: argparse.ArgumentParser) -> None:

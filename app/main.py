@@ -19,7 +19,6 @@ from app import security
 from app.engine import Engine
 from app.logic import flyaround
 from app.logic.controller import AppLogic
-from app.logic.upload import TargetUploads
 from app.state import STATE_KEYS
 from app.ui.layout import build_layout
 
@@ -40,7 +39,7 @@ class LmapdApp:
         self.server = server or get_server(f"lmapd-{next(_server_ids)}", client_type="vue3")
         self.engine = engine or Engine(self.scene)
         self.logic = AppLogic(self.server, self.engine, self.scene, **logic_options)
-        self.uploads = TargetUploads(self.logic, self.server)
+        self.uploads = self.logic.uploads  # the upload controls (a child of the logic)
         self.ui = build_layout(self.server)
         self.server.state.trame__title = "lmapd-sim"
         self.token = secrets.token_urlsafe(32)  # this launch's access token

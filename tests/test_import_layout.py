@@ -119,6 +119,38 @@ def test_no_module_of_the_app_imports_itself_through_a_circle():
     assert cycles(import_graph("app")) == []
 
 
+# the app's floors, lowest first: a module may import its own floor and those below, never above
+APP_FLOORS = (
+    ("app.state", "app.runner", "app.sync"),
+    ("app.payloads", "app.engine"),
+    ("app.logic",),
+    ("app.ui",),
+    ("app.main", "app.__main__", "app.security"),  # the server: joins them, guards the door
+)
+
+
+def app_floor(name: str) -> int:
+    for level, prefixes in enumerate(APP_FLOORS):
+        if any(name == p or name.startswith(p + ".") for p in prefixes):
+            return level
+    raise AssertionError(f"{name} is on no floor of APP_FLOORS: place it")
+
+
+def test_the_app_is_engine_below_logic_below_ui_and_logic_children_never_import_the_parent():
+    graph = import_graph("app")
+    upward = [
+        (a, b)
+        for a, imported in graph.items()
+        if a != "app"
+        for b in imported
+        if b != "app" and app_floor(b) > app_floor(a)
+    ]
+    assert upward == []
+    parent = "app.logic.controller"
+    children = [a for a, imported in graph.items() if parent in imported and a != "app.main"]
+    assert children == []
+
+
 def test_nothing_outside_simcore_cli_imports_the_commands():
     importers = []
     for package in ("simcore", "app", "scripts"):

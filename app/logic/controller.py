@@ -1,33 +1,31 @@
 """The app's logic on the UI thread: state changes -> Scene -> runner; frames -> state.
 
-Every control change is sanitised (clamped or refused with a message), mapped to a Scene and
-submitted to the runner, which computes in its worker thread. Finished frames come back through
-the event loop; a frame is applied only if it is still the newest generation. Frames are also
-paced by the page: at most ``max_in_flight`` frames (default 2) are sent and not yet reported
-drawn by the page (reports older than ``ack_timeout_s`` are not waited for); further frames wait,
-only the newest of them kept, so a slow browser never builds a queue of stale frames.
+The parent of one child per feature, which it calls (they never call it; where a child must ask
+for a new frame, the parent hands it a callback): the controls (``ControlPanel``: sanitised,
+corrections written back), the pixel selection (``PixelSelection``), the frame pacing
+(``FramePacer``: no more frames than the page draws), the fly-around (``FlyaroundLogic``) and the
+uploaded targets (``TargetUploads``). A valid scene goes to the runner, which computes in its
+worker thread; finished frames come back through the event loop and are applied only if they are
+still the newest generation.
 """
 
 from __future__ import annotations
 
 import asyncio
-import dataclasses
-import math
 import time
 from typing import Any
 
 import simcore
 from app.engine import Engine, Frame, Request
+from app.logic.controls import ControlPanel
 from app.logic.flyaround import FlyaroundLogic
+from app.logic.pacing import FramePacer
 from app.logic.scene_map import resolved_materials, scene_from_controls
 from app.logic.selection import PixelSelection
+from app.logic.upload import LoadedTarget, TargetUploads
 from app.payloads import views
 from app.runner import Outcome, Runner
-from app.state import (
-    STATE_KEYS,
-    controls_from_scene,
-    sanitize_controls,
-)
+from app.state import STATE_KEYS, Controls, controls_from_scene
 
 
 def _running_loop() -> asyncio.AbstractEventLoop | None:
@@ -55,23 +53,22 @@ class AppLogic:
         self.state = server.state
         self.engine = engine
         self.base_scene = base_scene
-        self.flow_control = flow_control
-        self.ack_timeout_s = ack_timeout_s
-        self.max_in_flight = max_in_flight
-        self.initial_controls, startup_messages = controls_from_scene(
+        initial_controls, startup_messages = controls_from_scene(
             base_scene, resolved_materials(engine.model, base_scene)
         )
-        self.controls = self.initial_controls
         self.last_frame: Frame | None = None
         self.n_frames_pushed = 0
         self._loop: asyncio.AbstractEventLoop | None = None
         self._applied_faces_key: tuple | None = None
-        self._inflight: dict[str, float] = {}  # frame key -> time pushed, not yet drawn
-        self._held: Outcome[Frame] | None = None
         self._pushed_generation = 0  # generation of the frame the page shows
-        self.selection = PixelSelection(self.state)  # the waveform chart's pixels
         self.runner: Runner[Request, Frame] = Runner(
             self._compute, self._deliver, debounce_s=debounce_s
+        )
+        # the children, one per feature
+        self.panel = ControlPanel(self.state, initial_controls)  # the scene's controls
+        self.selection = PixelSelection(self.state)  # the waveform chart's pixels
+        self.pacer: FramePacer[Outcome[Frame]] = FramePacer(
+            enabled=flow_control, max_in_flight=max_in_flight, ack_timeout_s=ack_timeout_s
         )
         self._init_state(startup_messages)
         self.state.change(*STATE_KEYS)(self.on_controls_change)
@@ -81,10 +78,26 @@ class AppLogic:
             runner=self.runner,
             resubmit=self.on_controls_change,
         )
+        self.uploads = TargetUploads(  # users' meshes (their own state)
+            server,
+            builtin=LoadedTarget(base_scene, engine, None, 0),
+            builtin_initial=initial_controls,
+            use_target=self.use_target,
+        )
         server.trigger("pixel_click")(self.on_pixel_click)
         server.trigger("frame_shown")(self.on_frame_shown)
         server.trigger("reset_controls")(self.reset_controls)
         server.controller.on_server_exited.add(lambda **_: self.runner.close())
+
+    @property
+    def controls(self) -> Controls:
+        """The controls of the newest valid scene."""
+        return self.panel.current
+
+    @property
+    def initial_controls(self) -> Controls:
+        """The controls a reset returns to."""
+        return self.panel.initial
 
     # -- state ------------------------------------------------------------------------------------
     def _init_state(self, startup_messages: list[str]) -> None:
@@ -131,14 +144,7 @@ class AppLogic:
 
     def on_controls_change(self, **_: Any) -> None:
         """Any control changed: sanitise, write back corrections, submit the new scene."""
-        raw = {key: self.state[key] for key in STATE_KEYS}
-        controls, messages = sanitize_controls(raw, self.controls)
-        if messages:
-            self.state.input_message = "; ".join(messages)
-        fixed = {k: v for k, v in controls.as_state().items() if not _same(raw.get(k), v)}
-        if fixed:
-            self.state.update(fixed)  # the page shows the value actually used
-        self.controls = controls
+        controls = self.panel.read()
         try:
             scene = self.flyaround.apply(scene_from_controls(self.base_scene, controls))
         except ValueError as exc:  # SceneError: a value the core refuses
@@ -160,20 +166,36 @@ class AppLogic:
         self.state.busy = True
         return self.runner.submit(request)
 
-    def switch_target(self, scene: simcore.Scene, engine: Engine, initial_controls) -> None:
-        """Compute on another target from now on: its base scene and engine, the controls a
-        reset returns to, the current controls with its parts' materials; its facets are drawn
-        anew with the next frame (the caller then asks for one)."""
+    def use_target(
+        self, scene: simcore.Scene, engine: Engine, initial_controls: Controls, name: str
+    ) -> None:
+        """Compute on another target from now on (the uploads' callback): its base scene and
+        engine, the controls a reset returns to, its parts' materials and mesh on the page, then
+        a new frame."""
         self.base_scene = scene
         self.engine = engine
-        self.initial_controls = initial_controls
-        self.controls = dataclasses.replace(self.controls, materials=initial_controls.materials)
-        self._applied_faces_key = None
+        self.panel.use_target(initial_controls)
+        self._applied_faces_key = None  # its facets are drawn anew with the next frame
+        model = engine.model
+        geometry = engine.target_geometry()
+        with self.state:
+            self.state.update(
+                {
+                    "target_name": name,
+                    "credit": model.credit or "",
+                    "part_names": list(model.part_names),
+                    "materials": dict(initial_controls.materials),
+                    "target_points": geometry["points"],
+                    "target_polys": geometry["polys"],
+                    "seen_facets": None,
+                    "home_camera": engine.home_camera(),
+                }
+            )
+        self.on_controls_change()
 
     def reset_controls(self, *_: Any, **__: Any) -> None:
         """Back to the scene the app started with (the paper scene unless --scene was given)."""
-        with self.state:
-            self.state.update({**self.initial_controls.as_state(), "input_message": ""})
+        self.panel.reset()
 
     # -- frames from the worker -------------------------------------------------------------------
     def _compute(self, request: Request) -> Frame:
@@ -196,24 +218,13 @@ class AppLogic:
         if not outcome.ok:
             self._show_error(outcome.error)
             return
-        wait_s = self._wait_for_page_s()
+        wait_s = self.pacer.wait_s()
         if wait_s > 0:
-            self._held = outcome  # replaces any older waiting frame
+            self.pacer.hold(outcome)  # replaces any older waiting frame
             if self._loop is not None:
                 self._loop.call_later(wait_s + 0.01, self._release_held)
             return
         self._push(outcome)
-
-    def _wait_for_page_s(self) -> float:
-        """0 if a frame may be sent now, else how long until the oldest unreported frame stops
-        counting (the page may never report it: a hidden tab does not paint)."""
-        if not self.flow_control:
-            return 0.0
-        now = time.perf_counter()
-        self._inflight = {k: t for k, t in self._inflight.items() if now - t < self.ack_timeout_s}
-        if len(self._inflight) < self.max_in_flight:
-            return 0.0
-        return self.ack_timeout_s - (now - min(self._inflight.values()))
 
     def _show_error(self, error: BaseException | None) -> None:
         if isinstance(error, ValueError):  # SceneError, TargetError: messages meant for users
@@ -222,23 +233,18 @@ class AppLogic:
             text = f"Simulation failed ({type(error).__name__}): {error}"
         with self.state:
             self.state.error_message = text + " (showing the last good result)"
-            self.state.busy = bool(self._held)
+            self.state.busy = self.pacer.held is not None
 
     def on_frame_shown(self, key: str = "", *_: Any, **__: Any) -> None:
         """The page drew frame ``key`` (so every frame sent before it is done too): a waiting
         frame may go."""
         self.flyaround.on_frame_shown(key)  # playing: the next step may go
-        sent = self._inflight.get(key) if isinstance(key, str) else None
-        if sent is None:
-            return
-        self._inflight = {k: t for k, t in self._inflight.items() if t > sent}
-        self._release_held()
+        if self.pacer.drawn(key):
+            self._release_held()
 
     def _release_held(self) -> None:
-        if self._held is None or self._wait_for_page_s() > 0:
-            return
-        held, self._held = self._held, None
-        if self._still_wanted(held):
+        held = self.pacer.release()
+        if held is not None and self._still_wanted(held):
             self._push(held)
 
     def _still_wanted(self, outcome: Outcome[Frame]) -> bool:
@@ -285,13 +291,12 @@ class AppLogic:
         self.last_frame = frame
         self._pushed_generation = outcome.generation
         self.selection.shown(frame)
-        self._inflight[key] = time.perf_counter()
-        self._held = None  # anything still waiting is older than this frame
+        self.pacer.sent(key)  # anything still waiting is older than this frame
         self.n_frames_pushed += 1
         with self.state:
             self.state.update(update)
             # busy while a newer request than this frame's is under way (or a frame is held)
-            self.state.busy = not self.runner.is_current(outcome.generation) or bool(self._held)
+            self.state.busy = not self.runner.is_current(outcome.generation)
 
     # -- pixel selection --------------------------------------------------------------------------
     def on_pixel_click(
@@ -299,12 +304,3 @@ class AppLogic:
     ) -> None:
         """Click on the array image: select pixel (row, col); with shift, add/remove it."""
         self.selection.click(self.last_frame, row, col, add)
-
-
-def _same(a: Any, b: Any) -> bool:
-    """Equal values, with 5 == 5.0 but '5' != 5 and NaN never equal."""
-    if isinstance(a, bool) != isinstance(b, bool) or isinstance(a, str) != isinstance(b, str):
-        return False
-    if isinstance(a, float) and math.isnan(a):
-        return False
-    return a == b

@@ -34,7 +34,7 @@ import trimesh
 import simcore
 from app.engine import Engine
 from app.logic.scene_map import resolved_materials
-from app.state import echo
+from app.state import Controls, echo
 from simcore.target import TargetError, load_mesh_file
 
 log = logging.getLogger(__name__)
@@ -200,16 +200,29 @@ def load_uploaded(base: simcore.Scene, path: Path, scale: float) -> LoadedTarget
 
 
 class TargetUploads:
-    """The upload controls' logic: state ``upload_file`` (from the file input), ``upload_scale``,
-    trigger ``use_builtin_target``; ``upload_message`` / ``upload_error`` / ``upload_busy`` for the
-    page. Swaps the app's target (engine, base scene, material drop-downs) when a mesh loads."""
+    """The upload controls' logic, a child of the app's logic: state ``upload_file`` (from the
+    file input), ``upload_scale``, trigger ``use_builtin_target``; ``upload_message`` /
+    ``upload_error`` / ``upload_busy`` for the page.
 
-    def __init__(self, logic, server) -> None:
-        self.logic = logic
+    builtin : the target the app started with
+    builtin_initial : its controls (an uploaded target starts from them, with its own materials)
+    use_target : (scene, engine, initial controls, name) -> None, the parent's switch to another
+        target (called on the event loop when a mesh has loaded)
+    """
+
+    def __init__(
+        self,
+        server,
+        *,
+        builtin: LoadedTarget,
+        builtin_initial: Controls,
+        use_target: Callable[[simcore.Scene, Engine, Controls, str], None],
+    ) -> None:
         self.server = server
         self.state = server.state
-        self.builtin = LoadedTarget(logic.base_scene, logic.engine, None, 0)
-        self.builtin_initial = logic.initial_controls
+        self.builtin = builtin
+        self.builtin_initial = builtin_initial
+        self.use_target = use_target
         self.current = self.builtin
         self.files = PrivateDir()
         self._ticket = 0
@@ -311,35 +324,22 @@ class TargetUploads:
         self.state.update({"upload_error": f"Upload refused: {text}", "upload_busy": False})
 
     def _switch(self, target: LoadedTarget, message: str) -> None:
-        """Make ``target`` the app's target: new engine and base scene, the material drop-downs of
-        its parts, its mesh in the 3D view, then a new frame."""
-        logic = self.logic
+        """Make ``target`` the app's target (the parent swaps engine, base scene, materials and
+        mesh, then asks for a new frame)."""
         old = self.current
         self.current = target
         model = target.engine.model
         materials = resolved_materials(model, target.scene)
-        logic.switch_target(
+        with self.state:
+            self.state.update(
+                {"upload_message": message, "target_is_upload": target.path is not None}
+            )
+        self.use_target(
             target.scene,
             target.engine,
             dataclasses.replace(self.builtin_initial, materials=materials),
+            model.name if target.path is None else "uploaded mesh",
         )
-        geometry = target.engine.target_geometry()
-        with self.state:
-            self.state.update(
-                {
-                    "target_name": model.name if target.path is None else "uploaded mesh",
-                    "credit": model.credit or "",
-                    "part_names": list(model.part_names),
-                    "materials": dict(materials),
-                    "target_points": geometry["points"],
-                    "target_polys": geometry["polys"],
-                    "seen_facets": None,
-                    "home_camera": target.engine.home_camera(),
-                    "upload_message": message,
-                    "target_is_upload": target.path is not None,
-                }
-            )
-        logic.on_controls_change()
         if old.path is not None and old.path != target.path:
             old.path.unlink(missing_ok=True)
 

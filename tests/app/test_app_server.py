@@ -197,7 +197,7 @@ def test_reset_restores_the_starting_scene(app):
 
 def test_frames_wait_for_the_pages_acknowledgement_and_only_the_newest_waits(app):
     logic = app.logic
-    logic.flow_control, logic.max_in_flight = True, 2
+    logic.pacer.enabled, logic.pacer.max_in_flight = True, 2
     logic.on_frame_shown(app.state.frame_key)  # the page drew the current frame
     change(app, tnr=6)  # sent: nothing in flight
     first = app.state.frame_key
@@ -206,19 +206,19 @@ def test_frames_wait_for_the_pages_acknowledgement_and_only_the_newest_waits(app
     change(app, wait_busy=False, tnr=7)  # waits: two frames in flight
     change(app, wait_busy=False, tnr=8)  # replaces the waiting frame
     assert app.state.frame_key == second != first
-    assert logic._held is not None and app.state.busy
+    assert logic.pacer.held is not None and app.state.busy
     logic.on_frame_shown(first)  # one frame drawn: the newest waiting one goes
     assert logic.last_frame.result.scene.timing.tnr == 8 and not app.state.busy
-    assert logic._held is None
+    assert logic.pacer.held is None
 
 
 def test_a_page_that_never_reports_does_not_block_frames_for_long(app):
     logic = app.logic
-    logic.flow_control, logic.max_in_flight, logic.ack_timeout_s = True, 1, 0.05
+    logic.pacer.enabled, logic.pacer.max_in_flight, logic.pacer.ack_timeout_s = True, 1, 0.05
     logic.on_frame_shown(app.state.frame_key)
     change(app, tnr=6)  # sent; the page never reports it drawn
     change(app, wait_busy=False, tnr=7)  # waits for a report that never comes ...
-    assert logic._held is not None
+    assert logic.pacer.held is not None
     time.sleep(0.06)
     change(app, tnr=7.5)  # ... but only ack_timeout_s: the next frame goes out
     assert logic.last_frame.result.scene.timing.tnr == 7.5

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 import simcore
-from app.payloads import views
+from app.payloads import cloud, image, scene3d, stats, waveforms
 from app.runner import StaleRequest
 from app.state import MAX_SELECTED_PIXELS
 
@@ -58,17 +58,17 @@ class Engine:
     def __init__(self, scene: simcore.Scene, model: simcore.TargetModel | None = None):
         """``model``: the scene's target if already loaded (else it is loaded here)."""
         self.model = model if model is not None else simcore.load_target(scene.target)
-        self.frame = views.display_frame(self.model)
+        self.frame = scene3d.display_frame(self.model)
         self.pipeline = simcore.Pipeline()
         self.vertices_d = self.frame.from_target(self.model.mesh.vertices)  # display frame
         # key, seen-facets mesh, legend, and the hits they came from (kept alive: id() unique)
         self._facets: tuple | None = None
 
     def target_geometry(self) -> dict:
-        return views.target_geometry(self.model, self.frame)
+        return scene3d.target_geometry(self.model, self.frame)
 
     def home_camera(self) -> dict:
-        return views.home_camera(self.frame.radius_m)
+        return scene3d.home_camera(self.frame.radius_m)
 
     def compute(self, request: Request, stale: Callable[[], bool] = lambda: False) -> Frame:
         """Simulate ``request.scene`` and build every view's payload (runs in the worker).
@@ -90,16 +90,16 @@ class Engine:
         frame = Frame(
             result=result,
             summary=summary,
-            cloud=views.cloud_view(result, self.frame, request.color_by),
-            frustum=views.frustum_mesh(result, self.frame),
+            cloud=cloud.cloud_view(result, self.frame, request.color_by),
+            frustum=scene3d.frustum_mesh(result, self.frame),
             faces_key=faces_key,
             seen_facets=seen_facets,
             legend=legend,
-            image=views.array_image(result, request.image_kind),
+            image=image.array_image(result, request.image_kind),
             selection=selection,
-            waveforms=views.waveform_figure(result, selection),
-            snr_histogram=views.snr_histogram(result),
-            stats=views.stats_rows(summary),
+            waveforms=waveforms.waveform_figure(result, selection),
+            snr_histogram=stats.snr_histogram(result),
+            stats=stats.stats_rows(summary),
             simulate_s=t1 - t0,
             views_s=time.perf_counter() - t1,
             timings_s=dict(result.timings_s),
@@ -114,8 +114,8 @@ class Engine:
         if self._facets is not None and self._facets[0] == key:
             return key, self._facets[1], self._facets[2]
         visible = result.visible_faces
-        mesh = views.seen_facets_mesh(result.target, self.vertices_d, visible)
-        legend = views.material_legend(result.target, visible)
+        mesh = scene3d.seen_facets_mesh(result.target, self.vertices_d, visible)
+        legend = scene3d.material_legend(result.target, visible)
         self._facets = (key, mesh, legend, result.hits)
         return key, mesh, legend
 
@@ -125,9 +125,11 @@ class Engine:
         changed), or the default pixel when nothing is selected yet."""
         n = result.pixels
         if request.selection and request.selection_pixels:
-            chosen = views.rescale_selection(list(request.selection), request.selection_pixels, n)
+            chosen = waveforms.rescale_selection(
+                list(request.selection), request.selection_pixels, n
+            )
             return [p for p in chosen if 0 <= p[0] < n and 0 <= p[1] < n]
-        pixel = views.default_pixel(result)
+        pixel = waveforms.default_pixel(result)
         return [pixel] if pixel is not None else []
 
 

@@ -23,7 +23,7 @@ from app.logic.pacing import FramePacer
 from app.logic.scene_map import resolved_materials, scene_from_controls
 from app.logic.selection import PixelSelection
 from app.logic.upload import LoadedTarget, TargetUploads
-from app.payloads import views
+from app.payloads import scene3d, stats, style
 from app.runner import Outcome, Runner
 from app.state import STATE_KEYS, Controls, controls_from_scene
 
@@ -128,7 +128,7 @@ class AppLogic:
                 "legend": [],
                 "array_image": {"src": "", "colorbar": None, "pixels": 0},
                 "selected_pixels": [],
-                "selection_colors": list(views.SELECTION_COLORS),
+                "selection_colors": list(style.SELECTION_COLORS),
                 "waveforms": {"data": [], "layout": {}},
                 "snr_hist": {"data": [], "layout": {}},
                 "stats": [],
@@ -276,11 +276,11 @@ class AppLogic:
             "waveforms": waveforms,
             "snr_hist": frame.snr_histogram,
             "stats": frame.stats,
-            "stages": views.stage_rows(
+            "stages": stats.stage_rows(
                 frame.timings_s,
                 {"views (app)": frame.views_s, "request to page": total_s},
             ),
-            "footprint_text": views.footprint_text(frame.result.scene),
+            "footprint_text": scene3d.footprint_text(frame.result.scene),
             "error_message": "",
             "frame_key": key,
             "frame_generation": outcome.generation,

@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import Any
 
 from app.engine import Frame, selection_tuple
-from app.payloads import views
+from app.payloads import waveforms
 from app.state import MAX_SELECTED_PIXELS
 
 
@@ -34,7 +34,7 @@ class PixelSelection:
         if current == asked or not current or self.array_pixels != n:
             return frame.selection, frame.waveforms
         pixels = [[r, c] for r, c in current if 0 <= r < n and 0 <= c < n]
-        return pixels, views.waveform_figure(frame.result, pixels)
+        return pixels, waveforms.waveform_figure(frame.result, pixels)
 
     def shown(self, frame: Frame) -> None:
         """The page now shows ``frame``'s array."""
@@ -53,7 +53,7 @@ class PixelSelection:
         if not (0 <= r < n and 0 <= c < n):
             return
         current = [list(p) for p in self.current()]
-        selection = views.toggle_pixel(current, [r, c], bool(add), MAX_SELECTED_PIXELS)
+        selection = waveforms.toggle_pixel(current, [r, c], bool(add), MAX_SELECTED_PIXELS)
         with self.state:
             self.state.selected_pixels = selection
-            self.state.waveforms = views.waveform_figure(frame.result, selection)
+            self.state.waveforms = waveforms.waveform_figure(frame.result, selection)

@@ -14,7 +14,7 @@ from trame.widgets import vtk as vtkw
 from trame.widgets import vuetify3 as v3
 
 from app.payloads import encode
-from app.payloads.views import HIDDEN_COLOR
+from app.payloads.style import HIDDEN_COLOR
 
 BACKGROUND = "[0.102, 0.110, 0.137]"  # #1a1c23
 BACKGROUND_RGB = (26, 28, 35)

@@ -14,7 +14,7 @@ from PIL import Image
 
 import simcore
 from app.engine import Engine, Request
-from app.payloads import encode, views
+from app.payloads import cloud, encode, image, scene3d, stats, style, waveforms
 
 
 @pytest.fixture(scope="module")
@@ -94,7 +94,7 @@ def test_the_seen_facets_are_drawn_in_their_material_colours_over_the_grey_targe
     expected = engine.frame.from_target(model.mesh.vertices)[model.mesh.faces[visible]]
     assert np.allclose(triangles, expected, atol=1e-5)
     names = np.array(simcore.MATERIAL_NAMES)[model.face_material_library[visible]]
-    assert np.array_equal(colors, [encode.rgb_of(views.material_color(n)) for n in names])
+    assert np.array_equal(colors, [encode.rgb_of(scene3d.material_color(n)) for n in names])
 
 
 def test_the_legend_counts_every_facet_once(frame):
@@ -127,12 +127,12 @@ def test_a_computation_overtaken_by_a_newer_request_skips_the_views(engine, scen
 
 def test_the_frustum_spans_the_field_of_view_at_the_target_distance():
     fov = 0.03
-    points, segments = views.frustum_sensor(fov, 500.0, 9.0)
+    points, segments = scene3d.frustum_sensor(fov, 500.0, 9.0)
     footprint = points[8:12]
     assert np.allclose(footprint[:, 2], 500.0)
     assert np.allclose(np.abs(footprint[:, :2]), 500.0 * math.tan(fov / 2))
     assert segments.max() < len(points) and len(segments) == 9
-    close, _ = views.frustum_sensor(fov, 20.0, 9.0)
+    close, _ = scene3d.frustum_sensor(fov, 20.0, 9.0)
     assert np.allclose(close[:4], 0.0)  # the lidar itself is the apex when it is close
 
 
@@ -147,7 +147,7 @@ def test_the_cloud_view_splits_target_points_from_outliers(frame):
     assert points.shape == (cloud["n_target"], 3) and rgb.shape == (cloud["n_target"], 3)
     assert verts[0] == cloud["n_target"] and np.array_equal(verts[1:], np.arange(verts[0]))
     red = decoded(cloud["outliers"]["field"]["values"])
-    assert np.all(red == encode.rgb_of(views.OUTLIER_COLOR))
+    assert np.all(red == encode.rgb_of(style.OUTLIER_COLOR))
     assert cloud["colorbar"]["title"] == "Range"
 
 
@@ -155,35 +155,35 @@ def test_the_cloud_view_splits_target_points_from_outliers(frame):
 def test_every_colouring_gives_one_colour_per_target_point(frame, color_by):
     result = frame.result
     target = ~result.attributes["is_outlier"]
-    rgb, bar = views.point_colors(result, target, color_by)
+    rgb, bar = cloud.point_colors(result, target, color_by)
     assert rgb.shape == (int(target.sum()), 3) and rgb.dtype == np.uint8
     assert (bar is None) == (color_by == "outlier")
 
 
 def test_an_empty_point_set_is_one_hidden_point():
-    mesh = views.points_mesh(np.zeros((0, 3)), np.zeros((0, 3), np.uint8))
+    mesh = cloud.points_mesh(np.zeros((0, 3)), np.zeros((0, 3), np.uint8))
     assert decoded(mesh["mesh"]["points"]).shape == (1, 3)
 
 
 @pytest.mark.parametrize("kind", ["range", "peak_power"])
 def test_the_array_image_is_n_by_n_with_row_zero_at_the_top(frame, kind):
-    image = views.array_image(frame.result, kind)
-    png = base64.b64decode(image["src"].split(",", 1)[1])
+    payload = image.array_image(frame.result, kind)
+    png = base64.b64decode(payload["src"].split(",", 1)[1])
     pixels = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
     n = frame.result.pixels
-    assert pixels.shape == (n, n, 3) and image["pixels"] == n
+    assert pixels.shape == (n, n, 3) and payload["pixels"] == n
     no_echo = (
         ~np.isfinite(frame.result.range_image_m)
         if kind == "range"
         else (frame.result.peak_power_image_w <= 0)
     )
-    assert np.all(pixels[no_echo] == views.NO_ECHO_RGB)
-    assert np.any(pixels[~no_echo] != views.NO_ECHO_RGB)
+    assert np.all(pixels[no_echo] == style.NO_ECHO_RGB)
+    assert np.any(pixels[~no_echo] != style.NO_ECHO_RGB)
 
 
 def test_the_waveform_chart_shows_power_pulse_half_max_threshold_and_range(frame):
-    pixel = views.default_pixel(frame.result)
-    figure = views.waveform_figure(frame.result, [pixel])
+    pixel = waveforms.default_pixel(frame.result)
+    figure = waveforms.waveform_figure(frame.result, [pixel])
     names = [trace["name"] for trace in figure["data"]]
     wave = frame.result.waveform(*pixel)
     assert names[0].startswith(f"({pixel[0]}, {pixel[1]}) R = {wave.range_m:.3f} m")
@@ -200,7 +200,7 @@ def test_several_pixels_overlay_in_their_own_colours(frame):
     target = ~attrs["is_outlier"]
     rows, cols = attrs["row"][target][:3], attrs["col"][target][:3]
     pixels = [[int(r), int(c)] for r, c in zip(rows, cols, strict=True)]
-    figure = views.waveform_figure(frame.result, pixels)
+    figure = waveforms.waveform_figure(frame.result, pixels)
     first = [t for t in figure["data"] if t["name"].startswith("(")]
     assert len(first) == 3
     assert len({t["line"]["color"] for t in first}) == 3
@@ -208,30 +208,30 @@ def test_several_pixels_overlay_in_their_own_colours(frame):
 
 def test_a_pixel_without_echo_says_so_and_no_selection_asks_for_a_click(frame):
     no_echo = np.argwhere(frame.result.peak_power_image_w <= 0)[0]
-    figure = views.waveform_figure(frame.result, [no_echo.tolist()])
+    figure = waveforms.waveform_figure(frame.result, [no_echo.tolist()])
     assert figure["data"][0]["name"].endswith("no echo")
-    empty = views.waveform_figure(frame.result, [])
+    empty = waveforms.waveform_figure(frame.result, [])
     assert "Click a pixel" in empty["layout"]["annotations"][0]["text"]
 
 
 def test_clicks_select_and_shift_clicks_toggle_pixels():
-    assert views.toggle_pixel([[1, 1]], [2, 2], add=False, limit=8) == [[2, 2]]
-    assert views.toggle_pixel([[1, 1]], [2, 2], add=True, limit=8) == [[1, 1], [2, 2]]
-    assert views.toggle_pixel([[1, 1], [2, 2]], [1, 1], add=True, limit=8) == [[2, 2]]
-    assert views.toggle_pixel([[0, i] for i in range(8)], [5, 5], True, 8)[-1] == [5, 5]
-    assert len(views.toggle_pixel([[0, i] for i in range(8)], [5, 5], True, 8)) == 8
+    assert waveforms.toggle_pixel([[1, 1]], [2, 2], add=False, limit=8) == [[2, 2]]
+    assert waveforms.toggle_pixel([[1, 1]], [2, 2], add=True, limit=8) == [[1, 1], [2, 2]]
+    assert waveforms.toggle_pixel([[1, 1], [2, 2]], [1, 1], add=True, limit=8) == [[2, 2]]
+    assert waveforms.toggle_pixel([[0, i] for i in range(8)], [5, 5], True, 8)[-1] == [5, 5]
+    assert len(waveforms.toggle_pixel([[0, i] for i in range(8)], [5, 5], True, 8)) == 8
 
 
 def test_a_selection_follows_its_spot_when_the_array_size_changes():
-    assert views.rescale_selection([[127, 128], [0, 255]], 256, 64) == [[31, 32], [0, 63]]
-    assert views.rescale_selection([[10, 10], [11, 11]], 256, 16) == [[0, 0]]
+    assert waveforms.rescale_selection([[127, 128], [0, 255]], 256, 64) == [[31, 32], [0, 63]]
+    assert waveforms.rescale_selection([[10, 10], [11, 11]], 256, 16) == [[0, 0]]
 
 
 def test_the_stats_panel_lists_counts_snr_and_stage_times(frame):
     labels = [row["label"] for row in frame.stats]
     for wanted in ("Points", "Outliers (false alarms)", "Dropped pixels (missed)", "Median SNR"):
         assert wanted in labels
-    rows = views.stage_rows({"hits": 0.012, "target": 0.0}, {"views (app)": 0.003})
+    rows = stats.stage_rows({"hits": 0.012, "target": 0.0}, {"views (app)": 0.003})
     assert [r["stage"] for r in rows][: len(simcore.STAGES)] == list(simcore.STAGES)
     assert rows[0] == {"stage": "target", "ms": "cached", "cached": True}
     assert rows[2]["ms"] == "12.0" and rows[-1]["stage"] == "views (app)"

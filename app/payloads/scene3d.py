@@ -1,0 +1,182 @@
+"""The 3D scene's payloads: the display frame and cameras, the target mesh and its facet colours,
+the lidar's frustum and footprint, the material legend.
+
+Both 3D views share one display frame fixed to the target: the target frame rotated so that the
+zero pose (pitch = azimuth = 0) looks along the display's -Z with image-up along +Y. The target
+stays put when the pose changes; the lidar's frustum and the points move around it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+import simcore
+from app.payloads import encode
+from app.payloads.style import HIDDEN_COLOR, MATERIAL_COLORS, OTHER_MATERIAL_COLOR
+from simcore.geometry import front_view_rotation
+
+# Flip of the sensor axes (x right, y down, z boresight) to the display's (x right, y up, -z view).
+FLIP = np.diag([1.0, -1.0, -1.0])
+
+
+@dataclass(frozen=True)
+class DisplayFrame:
+    """rotation : (3, 3) target frame -> display frame; radius_m : target bounding radius."""
+
+    rotation: np.ndarray
+    radius_m: float
+
+    def from_target(self, points_t: np.ndarray) -> np.ndarray:
+        """(n, 3) target-frame points [m] in the display frame."""
+        return np.asarray(points_t, dtype=np.float64) @ self.rotation.T
+
+    def from_sensor(self, points_s: np.ndarray, rotation: np.ndarray, translation_m) -> np.ndarray:
+        """(n, 3) sensor-frame points [m] in the display frame, for the pose
+        p_sensor = rotation @ p_target + translation_m."""
+        p = np.asarray(points_s, dtype=np.float64) - np.asarray(translation_m)[None, :]
+        return self.from_target(p @ rotation)
+
+
+def display_frame(model: simcore.TargetModel) -> DisplayFrame:
+    """The shared display frame of a target (see the module docstring)."""
+    return DisplayFrame(FLIP @ front_view_rotation(model.mesh.extents), model.radius_m)
+
+
+def home_camera(
+    radius_m: float, azimuth_deg: float = 35.0, elevation_deg: float = 22.0
+) -> dict[str, list[float]]:
+    """A vtk.js camera that frames the target obliquely from the lidar's side (+Z)."""
+    az, el = math.radians(azimuth_deg), math.radians(elevation_deg)
+    direction = np.array([math.sin(az) * math.cos(el), math.sin(el), math.cos(az) * math.cos(el)])
+    distance = 1.15 * radius_m / math.sin(math.radians(15.0))  # vtk.js view angle 30 deg
+    return {
+        "position": (direction * distance).tolist(),
+        "focalPoint": [0.0, 0.0, 0.0],
+        "viewUp": [0.0, 1.0, 0.0],
+        "viewAngle": 30.0,
+        "centerOfRotation": [0.0, 0.0, 0.0],
+    }
+
+
+# ----------------------------------------------------------------------------------------------
+# the 3D scene: target mesh, facet colours, frustum, legend
+# ----------------------------------------------------------------------------------------------
+def target_geometry(model: simcore.TargetModel, frame: DisplayFrame) -> dict:
+    """vtk.js points and triangle cells of the target mesh in the display frame (sent once)."""
+    points = frame.from_target(model.mesh.vertices).astype(np.float32)
+    return {
+        "points": encode.typed_array(points),
+        "polys": encode.typed_array(encode.triangle_cells(model.mesh.faces)),
+    }
+
+
+def material_color(name: str) -> str:
+    return MATERIAL_COLORS.get(name, OTHER_MATERIAL_COLOR)
+
+
+def facet_colors(model: simcore.TargetModel, faces: np.ndarray) -> np.ndarray:
+    """(n, 3) uint8 material colour of each of the given facets."""
+    palette = np.array([encode.rgb_of(material_color(n)) for n in simcore.MATERIAL_NAMES], np.uint8)
+    return palette[model.face_material_library[np.asarray(faces, dtype=np.int64)]]
+
+
+def seen_facets_mesh(
+    model: simcore.TargetModel, vertices_d: np.ndarray, visible_faces: np.ndarray
+) -> dict:
+    """vtk.js mesh state of the facets seen this frame, in their material colours.
+
+    The whole target is drawn once, grey; these facets (with their own vertices, taken from the
+    display-frame vertices ``vertices_d`` (n_vertices, 3)) are drawn over it, so a new frame
+    sends only the few thousand facets seen, never the whole mesh.
+    """
+    faces = np.asarray(visible_faces, dtype=np.int64)
+    if len(faces) == 0:
+        faces = np.zeros(1, np.int64)  # one facet keeps the arrays non-empty; the view hides it
+    used, corners = np.unique(model.mesh.faces[faces], return_inverse=True)
+    return {
+        "mesh": {
+            "points": encode.typed_array(vertices_d[used].astype(np.float32)),
+            "polys": encode.typed_array(encode.triangle_cells(corners.reshape(-1, 3))),
+        },
+        "field": encode.rgb_field(facet_colors(model, faces), location="CellData"),
+    }
+
+
+def material_legend(model: simcore.TargetModel, visible_faces: np.ndarray) -> list[dict]:
+    """One entry per material the target uses: colour, label, facets seen / facets in all."""
+    lib = model.face_material_library
+    seen = np.bincount(lib[np.asarray(visible_faces, np.int64)], minlength=len(simcore.MATERIALS))
+    total = np.bincount(lib, minlength=len(simcore.MATERIALS))
+    rows = []
+    for i, name in enumerate(simcore.MATERIAL_NAMES):
+        if total[i]:
+            label = simcore.MATERIALS[name].label or name
+            rows.append(
+                {
+                    "name": name,
+                    "label": label,
+                    "color": material_color(name),
+                    "seen": int(seen[i]),
+                    "total": int(total[i]),
+                }
+            )
+    n_hidden = int(len(lib) - len(visible_faces))
+    rows.append(
+        {
+            "name": "hidden",
+            "label": "not seen this frame",
+            "color": HIDDEN_COLOR,
+            "seen": n_hidden,
+            "total": int(len(lib)),
+        }
+    )
+    return rows
+
+
+def frustum_sensor(
+    fov_rad: float, distance_m: float, radius_m: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The field-of-view frustum around the target, in the sensor frame.
+
+    Returns points (k, 3) [m] and segments (s, 2) int: the four edges from the lidar (or, if it
+    is more than 2.5 target radii away, from a plane there) to a plane behind the target, the
+    footprint rectangle at the target distance, and the boresight.
+    """
+    half = math.tan(fov_rad / 2.0)
+    near = max(0.0, distance_m - 2.5 * radius_m)
+    far = distance_m + 1.2 * radius_m
+    square = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], dtype=np.float64)
+
+    def rect(z: float) -> np.ndarray:
+        return np.column_stack([square * half * z, np.full(4, z)])
+
+    points = np.vstack([rect(near), rect(far), rect(distance_m), [[0, 0, near], [0, 0, far]]])
+    ring = np.array([[0, 1], [1, 2], [2, 3], [3, 0]])
+    edges = np.column_stack([np.arange(4), np.arange(4) + 4])
+    return points, np.vstack([edges, ring + 8, [[12, 13]]])
+
+
+def footprint_text(scene: simcore.Scene) -> str:
+    """The field of view's footprint at the target distance, e.g. '15.0 m × 15.0 m at 500 m'."""
+    distance = scene.pose.distance_m
+    side = 2.0 * distance * math.tan(scene.receive.fov_rad / 2.0)
+    return f"{side:.3g} m × {side:.3g} m at {distance:g} m"
+
+
+def frustum_mesh(result: simcore.Result, frame: DisplayFrame) -> dict:
+    """vtk.js mesh state of the frustum lines in the display frame."""
+    scene = result.scene
+    points_s, segments = frustum_sensor(
+        scene.receive.fov_rad, scene.pose.distance_m, frame.radius_m
+    )
+    pose = result.hits.pose
+    points_d = frame.from_sensor(points_s, pose.rotation, pose.translation_m)
+    return {
+        "mesh": {
+            "points": encode.typed_array(points_d.astype(np.float32)),
+            "lines": encode.typed_array(encode.polyline_cells(segments)),
+        }
+    }

@@ -1,0 +1,98 @@
+"""The stats panel: the summary with units, the stage timings, the SNR histogram."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+import simcore
+from app.payloads.charts import base_layout, note, vline
+from app.payloads.style import SNR_FLOOR
+
+
+def stats_rows(summary: dict) -> list[dict]:
+    """Label/value rows of the summary, with units."""
+
+    def fmt(value, spec: str = "d", unit: str = "") -> str:
+        if value is None:
+            return "–"
+        return f"{value:{spec}}{unit}"
+
+    sigma = summary.get("range_sigma_m_median")
+    return [
+        {"label": "Points", "value": fmt(summary["n_points"], ",d")},
+        {"label": "Target points", "value": fmt(summary["n_target_points"], ",d")},
+        {"label": "Outliers (false alarms)", "value": fmt(summary["n_outliers"], ",d")},
+        {"label": "Dropped pixels (missed)", "value": fmt(summary["n_dropped"], ",d")},
+        {
+            "label": "Pixels seeing the target",
+            "value": f"{summary['n_hit_pixels']:,d} of {summary['n_pixels']:,d}",
+        },
+        {"label": "Mean detection probability", "value": fmt(summary["p_detect_mean"], ".3f")},
+        {"label": "Median SNR", "value": fmt(summary["snr_median"], ".3g")},
+        {
+            "label": "Median range σ",
+            "value": "–" if sigma is None else f"{sigma * 100:.3g} cm",
+        },
+    ]
+
+
+def stage_rows(timings_s: dict[str, float], extra_s: dict[str, float]) -> list[dict]:
+    """One row per pipeline stage (ms, or 'cached'), then the app's own steps."""
+    rows = []
+    for stage in simcore.STAGES:
+        t = timings_s.get(stage, 0.0)
+        rows.append(
+            {"stage": stage, "ms": "cached" if t == 0.0 else f"{t * 1e3:.1f}", "cached": t == 0.0}
+        )
+    for name, t in extra_s.items():
+        rows.append({"stage": name, "ms": f"{t * 1e3:.1f}", "cached": False})
+    return rows
+
+
+def snr_histogram(result: simcore.Result) -> dict:
+    """Plotly histogram of the SNR of every pixel that receives an echo, in log10 bins (the axis
+    is labelled in SNR), with the TNR marked (a pixel needs SNR above about TNR to be detected)."""
+    snr = np.asarray(result.receiver.snr, dtype=np.float64)
+    snr = snr[np.isfinite(snr) & (snr > 0)]
+    tnr = result.scene.timing.tnr
+    layout = base_layout("SNR (log scale)", "pixels", bargap=0.0, showlegend=False)
+    layout["margin"] = {"l": 48, "r": 8, "t": 8, "b": 38}
+    if snr.size == 0:
+        layout["annotations"] = [note("No echo")]
+        return {"data": [], "layout": layout}
+    logs = np.log10(np.clip(snr, SNR_FLOOR, None))  # weaker echoes are counted in the first bin
+    lo, hi = min(float(logs.min()), math.log10(tnr)) - 0.1, float(logs.max()) + 0.1
+    edges = np.linspace(lo, hi, 41)
+    counts, _ = np.histogram(logs, bins=edges)
+    ticks = np.arange(math.ceil(lo), math.floor(hi) + 1)
+    layout["xaxis"].update(
+        range=[lo, hi],
+        tickvals=ticks.tolist(),
+        ticktext=[f"{10.0**k:g}" for k in ticks],
+    )
+    layout["shapes"] = [vline(math.log10(tnr), "#d62728")]
+    layout["annotations"] = [
+        {
+            "text": f"TNR {tnr:g}",
+            "x": math.log10(tnr),
+            "xref": "x",
+            "y": 1,
+            "yref": "paper",
+            "showarrow": False,
+            "xanchor": "left",
+            "yanchor": "top",
+            "font": {"color": "#d62728", "size": 10},
+        }
+    ]
+    centres = (edges[:-1] + edges[1:]) / 2
+    bars = {
+        "type": "bar",
+        "x": centres.tolist(),
+        "y": counts.tolist(),
+        "marker": {"color": "#5c6bc0"},
+        "customdata": (10**centres).tolist(),
+        "hovertemplate": "SNR ≈ %{customdata:.3g}: %{y} pixels<extra></extra>",
+    }
+    return {"data": [bars], "layout": layout}

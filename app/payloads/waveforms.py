@@ -1,0 +1,213 @@
+"""Pixel selection and the waveform chart: which pixels the chart shows, and their echoes."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+import simcore
+from app.payloads import encode
+from app.payloads.charts import base_layout, note, vline
+from app.payloads.style import SELECTION_COLORS
+from simcore.constants import C as C_M_S
+
+
+def default_pixel(result: simcore.Result) -> list[int] | None:
+    """The detected target pixel nearest the array centre (None if nothing was detected)."""
+    attrs = result.attributes
+    target = ~np.asarray(attrs["is_outlier"], dtype=bool)
+    if not target.any():
+        return None
+    rows, cols = attrs["row"][target], attrs["col"][target]
+    centre = (result.pixels - 1) / 2.0
+    i = int(np.argmin((rows - centre) ** 2 + (cols - centre) ** 2))
+    return [int(rows[i]), int(cols[i])]
+
+
+def rescale_selection(pixels: list, n_from: int, n_to: int) -> list[list[int]]:
+    """Selected (row, col) pixels of an n_from array mapped to the same spots of an n_to array."""
+    if n_from == n_to:
+        return [[int(r), int(c)] for r, c in pixels]
+    out: list[list[int]] = []
+    for r, c in pixels:
+        rc = [
+            min(n_to - 1, int((r + 0.5) * n_to / n_from)),
+            min(n_to - 1, int((c + 0.5) * n_to / n_from)),
+        ]
+        if rc not in out:
+            out.append(rc)
+    return out
+
+
+def toggle_pixel(selection: list, pixel: list[int], add: bool, limit: int) -> list[list[int]]:
+    """The new selection after a click: ``add`` (shift-click) toggles ``pixel`` in the selection
+    (dropping the oldest beyond ``limit``); a plain click selects ``pixel`` alone."""
+    pixel = [int(pixel[0]), int(pixel[1])]
+    if not add:
+        return [pixel]
+    current = [[int(r), int(c)] for r, c in selection]
+    if pixel in current:
+        current.remove(pixel)
+        return current
+    return (current + [pixel])[-limit:]
+
+
+MAX_CHART_POINTS = 400  # per trace: more is invisible at chart size and costs transfer time
+
+
+def _chart_xy(t_s: np.ndarray, power_w: np.ndarray, delay_s: float, scale_w: float):
+    """Chart coordinates: time [ns] rounded to 1 ps and power in chart units rounded to 5
+    significant digits, thinned to at most MAX_CHART_POINTS samples."""
+    step = max(1, math.ceil(len(t_s) / MAX_CHART_POINTS))
+    t_ns = np.round((t_s[::step] + delay_s) * 1e9, 3)
+    y = power_w[::step] / scale_w
+    peak = float(np.max(np.abs(y))) if len(y) else 0.0
+    digits = 5 - math.ceil(math.log10(peak)) if peak > 0 else 5
+    return t_ns.tolist(), np.round(y, max(digits, 0)).tolist()
+
+
+def _waveform_traces(w: simcore.Waveform, color: str, scale: float) -> list[dict]:
+    """Filtered and raw echo, the delayed emitted pulse and the half-maximum mark of one pixel."""
+    name = f"({w.row}, {w.col})"
+    if w.detected and math.isfinite(w.range_m):
+        name += f" R = {w.range_m:.3f} m"
+    else:
+        name += f" not detected (P_d = {w.p_detect:.2f})"
+    group = f"px{w.row}_{w.col}"
+    t_ns, filtered = _chart_xy(w.t_s, w.filtered_w, 0.0, scale)
+    _, raw = _chart_xy(w.t_s, w.power_w, 0.0, scale)
+    traces = [
+        {
+            "type": "scatter",
+            "mode": "lines",
+            "x": t_ns,
+            "y": filtered,
+            "name": name,
+            "legendgroup": group,
+            "line": {"color": color, "width": 2},
+            "hovertemplate": "%{x:.2f} ns<br>%{y:.4g}<extra>received (band-limited)</extra>",
+        },
+        {
+            "type": "scatter",
+            "mode": "lines",
+            "x": t_ns,
+            "y": raw,
+            "name": "received, unfiltered",
+            "legendgroup": group,
+            "showlegend": False,
+            "line": {"color": color, "width": 1, "dash": "dot"},
+            "hovertemplate": "%{x:.2f} ns<br>%{y:.4g}<extra>received (unfiltered)</extra>",
+        },
+    ]
+    reference_m = w.range_true_m if math.isfinite(w.range_true_m) else w.range_m
+    if len(w.emitted_t_s) and math.isfinite(reference_m):
+        t_emitted, emitted = _chart_xy(w.emitted_t_s, w.emitted_w, 2.0 * reference_m / C_M_S, scale)
+        traces.append(
+            {
+                "type": "scatter",
+                "mode": "lines",
+                "x": t_emitted,
+                "y": emitted,
+                "name": "emitted pulse (delayed by 2R/c)",
+                "legendgroup": group,
+                "showlegend": False,
+                "opacity": 0.55,
+                "line": {"color": color, "width": 1.5, "dash": "dash"},
+                "hovertemplate": "%{x:.2f} ns<br>%{y:.4g}<extra>emitted, delayed 2R/c</extra>",
+            }
+        )
+    if math.isfinite(w.t_half_s) and len(w.filtered_w):
+        half = float(np.max(w.filtered_w)) / 2.0
+        traces.append(
+            {
+                "type": "scatter",
+                "mode": "markers",
+                "x": [w.t_half_s * 1e9],
+                "y": [half / scale],
+                "name": "half-maximum time",
+                "legendgroup": group,
+                "showlegend": False,
+                "marker": {"symbol": "diamond", "size": 9, "color": color, "line": {"width": 1}},
+                "hovertemplate": "t½ = %{x:.3f} ns<extra>half maximum</extra>",
+            }
+        )
+    return traces
+
+
+def _detected_time_ns(w: simcore.Waveform) -> float | None:
+    """The time of the measured range on the chart's axis: the half-maximum time shifted by the
+    range noise (measured minus noise-free range)."""
+    if not (w.detected and math.isfinite(w.range_m) and math.isfinite(w.t_half_s)):
+        return None
+    return (w.t_half_s + 2.0 * (w.range_m - w.range_true_m) / C_M_S) * 1e9
+
+
+def waveform_figure(result: simcore.Result, selection: list) -> dict:
+    """The plotly figure of the selected pixels' echoes (several pixels overlaid): received power
+    vs time since emission, the emitted pulse for reference, the half-maximum marks, the
+    threshold and the detected ranges."""
+    waves = [result.waveform(int(r), int(c)) for r, c in selection]
+    peak = max([float(np.max(w.power_w)) for w in waves if len(w.power_w)] + [0.0])
+    threshold_w = waves[0].threshold_w if waves else float("nan")
+    scale, prefix = encode.si_prefix(max(peak, threshold_w if math.isfinite(threshold_w) else 0))
+    data: list[dict] = []
+    shapes: list[dict] = []
+    annotations: list[dict] = []
+    for i, w in enumerate(waves):
+        color = SELECTION_COLORS[i % len(SELECTION_COLORS)]
+        if not len(w.t_s):
+            data.append(_no_echo_trace(w, color))
+            continue
+        data += _waveform_traces(w, color, scale)
+        t_det = _detected_time_ns(w)
+        if t_det is not None:
+            shapes.append(vline(t_det, color))
+    times = [t for w in waves for t in (w.t_s[:1].tolist() + w.t_s[-1:].tolist())]
+    if math.isfinite(threshold_w) and times:
+        data.append(
+            {
+                "type": "scatter",
+                "mode": "lines",
+                "x": [min(times) * 1e9, max(times) * 1e9],
+                "y": [threshold_w / scale] * 2,
+                "name": f"threshold (TNR × σn) = {encode.si_text(threshold_w, 'W')}",
+                "line": {"color": "#616161", "width": 1.5, "dash": "dashdot"},
+                "hovertemplate": "%{y:.4g}<extra>threshold</extra>",
+            }
+        )
+    if not waves:
+        annotations.append(note("Click a pixel of the detector array to see its echo"))
+    elif not any(len(w.t_s) for w in waves):
+        annotations.append(note("No echo in the selected pixel(s)"))
+    layout = base_layout(
+        "time since emission (ns)",
+        f"power at the receiver ({prefix}W)",
+        legend={
+            "orientation": "h",
+            "x": 0,
+            "y": 1.01,
+            "yanchor": "bottom",
+            "font": {"size": 10},
+            "bgcolor": "rgba(255,255,255,0.8)",
+        },
+        shapes=shapes,
+        annotations=annotations,
+        hovermode="closest",
+    )
+    layout["margin"]["t"] = 10 + 18 * math.ceil(len(data) and len(waves) / 2)
+    layout["xaxis"]["tickformat"] = ",.0f"
+    layout["xaxis"]["hoverformat"] = ",.2f"
+    return {"data": data, "layout": layout}
+
+
+def _no_echo_trace(w: simcore.Waveform, color: str) -> dict:
+    return {
+        "type": "scatter",
+        "mode": "markers",
+        "x": [None],  # plotly lists a trace in the legend only if it has a point
+        "y": [None],
+        "name": f"({w.row}, {w.col}) no echo",
+        "showlegend": True,
+        "marker": {"color": color},
+    }

@@ -53,8 +53,7 @@ class LmapdApp:
     def start(self, host: str, port: int, limits: security.Limits | None = None) -> None:
         """Serve until interrupted: no browser is opened and an idle server stays alive. Only
         the page at the printed address (it carries the access token) can connect."""
-        trame_args = ["--host", host, "--port", str(port), "--server", "--timeout", "0"]
-        trame_args += ["--authKey", self.token]  # never the framework's public default
+        trame_args = trame_arguments(host, port, self.token)
         cli = self.server.cli
         parse = cli.parse_known_args
         # trame reads sys.argv by default; give it exactly our options (sys.argv may hold
@@ -77,6 +76,13 @@ class LmapdApp:
 
 
 LOOPBACK_HOSTS = security.LOOPBACK_NAMES
+
+
+def trame_arguments(host: str, port: int, token: str) -> list[str]:
+    """The options the trame server is started with: no browser, no idle time-out, this launch's
+    token as its key (never the framework's public default). ``--authKey=TOKEN`` in one word: a
+    URL-safe token begins with "-" one time in 64, and would be read as an option."""
+    return ["--host", host, "--port", str(port), "--server", "--timeout", "0", f"--authKey={token}"]
 
 
 def client_keys() -> dict[str, security.Screen]:

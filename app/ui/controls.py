@@ -13,7 +13,7 @@ from app.logic.scene_map import preset_text
 from app.state import PRESET_CHOICES, SPECS, SUBRAY_CHOICES, ControlSpec
 from app.ui import flyaround
 from app.ui.upload import upload_panel
-from app.ui.widgets import labelled_toggle
+from app.ui.widgets import a11y_attributes, labelled_toggle
 
 SLOW_RAYS = 2e6  # rays per flash above which the page warns that updates take seconds
 
@@ -35,7 +35,6 @@ def _number_field(key: str, spec: ControlSpec) -> None:
         single_line=True,
         style="width: 96px",
         step=spec.step,
-        aria_label=f"{_label(spec)} value",
         classes=f"value-{key}",
         __events=["change"],
     )
@@ -54,7 +53,9 @@ def slider(key: str) -> None:
         model = (key,)
         update = f"{key} = $event"
         bounds = {"min": spec.lo, "max": spec.hi, "step": spec.step}
-    with html.Div(classes=f"control control-{key}"):
+    with html.Div(
+        classes=f"control control-{key}", **a11y_attributes(spec.label, spec.unit, spec.log_slider)
+    ):
         html.Div(_label(spec), classes="control-label text-body-2")
         with v3.VSlider(
             model_value=model,
@@ -64,7 +65,6 @@ def slider(key: str) -> None:
             color="primary",
             track_size=3,
             thumb_size=14,
-            aria_label=_label(spec),
             classes=f"slider-{key}",
             **bounds,
         ):

@@ -6,7 +6,7 @@ from __future__ import annotations
 from trame.widgets import html
 from trame.widgets import vuetify3 as v3
 
-from app.ui.widgets import button_toggle
+from app.ui.widgets import a11y_attributes, button_toggle
 
 FOV_HINT = (
     "Pose from the two orbits of Table 3 (lidar tracking the target). At about 200 m the 30 mrad "
@@ -25,6 +25,7 @@ def mode_switch() -> None:
                 ("Fly-around", "flyaround", "mode-flyaround"),
             ],
             classes="mode-toggle",
+            label="Mode",
         )
 
 
@@ -32,7 +33,9 @@ def flyaround_panel() -> None:
     """Shown in fly-around mode only."""
     with html.Div(v_show="mode === 'flyaround'", classes="flyaround-panel"):
         html.Div("Fly-around (one orbit)", classes="section-title text-overline")
-        with html.Div(classes="control control-fly_t_s"):
+        with html.Div(
+            classes="control control-fly_t_s", **a11y_attributes("Time since the epoch", "s")
+        ):
             html.Div("Time (s) since the epoch", classes="control-label text-body-2")
             with v3.VSlider(
                 model_value=("fly_t_s",),
@@ -45,7 +48,6 @@ def flyaround_panel() -> None:
                 color="primary",
                 track_size=3,
                 thumb_size=14,
-                aria_label="Time (s)",
                 classes="slider-fly_t_s",
             ):
                 with v3.Template(v_slot_prepend=True):

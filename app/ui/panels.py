@@ -32,6 +32,7 @@ def array_card() -> None:
                 [("Range", "range", ""), ("Peak power", "peak_power", "")],
                 size="x-small",
                 classes="image-kind",
+                label="Array image shows",
             )
         html.Div(
             "Click a pixel to see its echo; shift-click adds more.",

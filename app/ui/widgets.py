@@ -7,15 +7,36 @@ from collections.abc import Sequence
 from trame.widgets import html
 from trame.widgets import vuetify3 as v3
 
+SPOKEN_UNITS = {"deg": "degrees", "per side": "pixels per side"}  # what a screen reader says
+
+
+def html_attributes(**attrs: str) -> dict:
+    """Keyword arguments that put plain HTML attributes on a trame widget (``aria_label`` ->
+    ``aria-label``): a widget drops keywords it does not declare unless ``__properties`` names
+    them."""
+    return {**attrs, "__properties": [(key, key.replace("_", "-")) for key in attrs]}
+
+
+def a11y_attributes(name: str, unit: str = "", log_scale: bool = False) -> dict:
+    """The data attributes from which the page's accessibility script names a control's slider
+    and number field and speaks the slider's value with its unit (app.ui.layout.A11Y_SCRIPT)."""
+    attrs = {"data_a11y_name": name, "data_a11y_unit": SPOKEN_UNITS.get(unit, unit)}
+    if log_scale:
+        attrs["data_a11y_log"] = "1"
+    return html_attributes(**attrs)
+
+
 # (button text, value, extra CSS classes of the button)
 Choice = tuple[str, object, str]
 
 
 def button_toggle(
-    key: str, choices: Sequence[Choice], size: str = "small", classes: str = ""
+    key: str, choices: Sequence[Choice], size: str = "small", classes: str = "", label: str = ""
 ) -> None:
-    """A mandatory one-of-several button group bound to state ``key``."""
+    """A mandatory one-of-several button group bound to state ``key`` (``label``: its name for
+    screen readers)."""
     with v3.VBtnToggle(
+        **html_attributes(role="group", aria_label=label or key),
         model_value=(key,),
         update_modelValue=f"{key} = $event",
         mandatory=True,
@@ -35,4 +56,4 @@ def labelled_toggle(
     """A control label above a :func:`button_toggle`."""
     with html.Div(classes=div_classes, **div_attrs):
         html.Div(label, classes="control-label text-body-2")
-        button_toggle(key, choices)
+        button_toggle(key, choices, label=label)

@@ -8,6 +8,7 @@ short message. The work of each test is bounded; waits have generous limits only
 from __future__ import annotations
 
 import asyncio
+import concurrent.futures
 import urllib.error
 import urllib.request
 
@@ -38,13 +39,15 @@ def app(tmp_path_factory):
 
 
 def run(coroutine_fn, *args):
-    """Run ``coroutine_fn(session, *args)`` with a fresh aiohttp session."""
+    """Run ``coroutine_fn(session, *args)`` with a fresh aiohttp session, in a thread of its own
+    (its own event loop: the browser tests' Playwright keeps one running in this thread)."""
 
     async def main():
         async with aiohttp.ClientSession() as session:
             return await coroutine_fn(session, *args)
 
-    return asyncio.run(main())
+    with concurrent.futures.ThreadPoolExecutor(max_workers=1) as pool:
+        return pool.submit(asyncio.run, main()).result()
 
 
 def http_get(url: str, headers: dict | None = None) -> tuple[int, dict]:

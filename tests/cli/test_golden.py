@@ -12,9 +12,9 @@ the hashes are not compared and floating-point figures must agree to ``RTOL``: E
 single precision with code chosen for the CPU (AVX2, AVX-512), so hit distances differ in their
 last float32 bits between CPUs, about 1e-8 relative downstream (measured: range sigma medians
 4e-8 apart, P_d means 1e-11, between the machine of the golden run of 2026-11-23 and an AMD
-EPYC of 2026-11-25). RTOL = 1e-6 is eight float32 ulps: on another machine a change of the ranges by more
-than about 0.5 mm at 500 m, and any change of a count, pixel, material or facet, still fails;
-on the golden's own platform every bit counts.
+EPYC of 2026-11-25). RTOL = 1e-6 is eight float32 ulps: on another machine a change of the
+ranges by more than about 0.5 mm at 500 m, and any change of a count, pixel, material or facet,
+still fails; on the golden's own platform every bit counts.
 
 The fingerprints were written by this file on main at 60a3e29, before the code was reorganised
 ("One house"), and the reorganisation kept them bit for bit. They were written again once, on

@@ -12,6 +12,7 @@ still the newest generation.
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import time
 from typing import Any
 
@@ -19,6 +20,7 @@ import simcore
 from app.engine import Engine, Frame, Request
 from app.logic.controls import ControlPanel
 from app.logic.flyaround import FlyaroundLogic
+from app.logic.links import controls_from_link, link_query
 from app.logic.pacing import FramePacer
 from app.logic.scene_map import resolved_materials, scene_from_controls
 from app.logic.selection import PixelSelection
@@ -87,6 +89,7 @@ class AppLogic:
         server.trigger("pixel_click")(self.on_pixel_click)
         server.trigger("frame_shown")(self.on_frame_shown)
         server.trigger("reset_controls")(self.reset_controls)
+        server.trigger("open_link")(self.open_link)
         server.controller.on_server_exited.add(lambda **_: self.runner.close())
 
     @property
@@ -139,12 +142,14 @@ class AppLogic:
                 "frame_key": "",
                 "frame_generation": 0,
                 "n_points": 0,
+                "share_query": link_query(self.panel.current, self.panel.initial),
             }
         )
 
     def on_controls_change(self, **_: Any) -> None:
         """Any control changed: sanitise, write back corrections, submit the new scene."""
         controls = self.panel.read()
+        self.state.share_query = link_query(controls, self.panel.initial)
         try:
             scene = self.flyaround.apply(scene_from_controls(self.base_scene, controls))
         except ValueError as exc:  # SceneError: a value the core refuses
@@ -192,6 +197,17 @@ class AppLogic:
                 }
             )
         self.on_controls_change()
+
+    def open_link(self, settings: Any = None, *_: Any, **__: Any) -> None:
+        """The page was opened with a shared link: its settings replace the controls (from the
+        initial ones; what it leaves out takes its default), the page's display choices stay."""
+        controls, messages = controls_from_link(settings, self.panel.initial)
+        current = self.panel.current
+        controls = dataclasses.replace(
+            controls, color_by=current.color_by, image_kind=current.image_kind
+        )
+        with self.state:
+            self.state.update({**controls.as_state(), "input_message": "; ".join(messages)})
 
     def reset_controls(self, *_: Any, **__: Any) -> None:
         """Back to the scene the app started with (the paper scene unless --scene was given)."""

@@ -15,6 +15,7 @@ from app.ui import flyaround
 from app.ui.upload import upload_panel
 from app.ui.widgets import a11y_attributes, labelled_toggle
 
+SHARE_URL = "trame.utils.lmapdLink ? trame.utils.lmapdLink.url(share_query) : ''"
 SLOW_RAYS = 2e6  # rays per flash above which the page warns that updates take seconds
 
 
@@ -168,6 +169,38 @@ def display_choices() -> None:
     )
 
 
+def share_panel() -> None:
+    """The link that reproduces the current frame (settings in the query string), to copy
+    (app.ui.layout.LINK_SCRIPT makes it)."""
+    with v3.VExpansionPanels(variant="accordion", classes="mt-2 share-panel"):
+        with v3.VExpansionPanel():
+            v3.VExpansionPanelTitle("Share this scene (link)", classes="text-body-2")
+            with v3.VExpansionPanelText():
+                v3.VTextField(
+                    label="Link to this scene",
+                    model_value=(SHARE_URL,),
+                    readonly=True,
+                    density="compact",
+                    variant="outlined",
+                    hide_details=True,
+                    classes="share-link mb-2",
+                )
+                v3.VBtn(
+                    "Copy link",
+                    prepend_icon="mdi-link-variant",
+                    size="small",
+                    variant="tonal",
+                    color="primary",
+                    click="trame.utils.lmapdLink.copy(share_query)",
+                    classes="copy-link",
+                )
+                html.Div(
+                    "Whoever opens it sees this pose, array, energy, TNR, fidelity, seed and "
+                    "materials: the same points.",
+                    classes="text-caption hint mt-1",
+                )
+
+
 def section(title: str) -> None:
     html.Div(title, classes="section-title text-overline")
 
@@ -197,6 +230,7 @@ def drawer_content() -> None:
         seed_field()
         materials_panel()
         upload_panel()
+        share_panel()
         section("Display")
         display_choices()
         html.Div(

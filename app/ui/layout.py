@@ -79,6 +79,29 @@ A11Y_SCRIPT = """
 })();
 """
 
+# Shared links (app.logic.links): a page opened with settings in its query string hands them to
+# the server once; ``url`` makes the link of the current settings, with this page's token.
+LINK_SCRIPT = """
+window.trame.utils.lmapdLink = {
+  url(query) {
+    const token = new URLSearchParams(window.location.search).get('token');
+    const head = token ? `token=${encodeURIComponent(token)}&` : '';
+    return `${window.location.origin}${window.location.pathname}?${head}${query || ''}`;
+  },
+  copy(query) {
+    const text = this.url(query);
+    if (navigator.clipboard) navigator.clipboard.writeText(text).catch(() => {});
+    return text;
+  },
+};
+(() => {
+  const settings = new URLSearchParams(window.location.search);
+  settings.delete('token');
+  const given = Object.fromEntries(settings);
+  if (Object.keys(given).length) window.trame.trigger('open_link', [given]);
+})();
+"""
+
 CSS = """
 html { overflow-y: auto; }
 .controls .control { margin-bottom: 2px; }
@@ -225,6 +248,7 @@ def build_layout(server) -> VAppLayout:
         client.Style(CSS)
         client.Script(FRAME_SCRIPT)  # before the watcher below: created first
         client.Script(A11Y_SCRIPT)
+        client.Script(LINK_SCRIPT)
         client.ClientStateChange(value="frame_key", change=FRAME_SHOWN, trigger_on_create=True)
         app_bar()
         with v3.VNavigationDrawer(

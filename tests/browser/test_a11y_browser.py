@@ -48,7 +48,11 @@ def controls_in_tree(page) -> list[dict]:
 
 
 def open_every_panel(page) -> None:
-    for title in ("Target materials (per part)", "Target mesh (upload your own)"):
+    for title in (
+        "Target materials (per part)",
+        "Target mesh (upload your own)",
+        "Share this scene (link)",
+    ):
         page.get_by_role("button", name=title).click()
     page.wait_for_timeout(400)  # the panels' transitions
 

@@ -1,0 +1,140 @@
+"""Shareable scenes (app.logic.links): a link carries every setting in the names of
+``lmapd simulate --set`` and restores the same frame; a tampered link falls back to defaults with
+a message, never an error."""
+
+from __future__ import annotations
+
+import dataclasses
+import urllib.parse
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from support.app_helpers import settle
+
+import simcore
+from app.engine import Engine
+from app.logic.links import MAX_LINK_SETTINGS, controls_from_link, link_query, link_settings
+from app.logic.scene_map import resolved_materials, scene_from_controls
+from app.main import LmapdApp
+from app.state import Controls, controls_from_scene
+
+SMALL = {"pixels": 48, "fidelity.subrays": 1}
+
+
+@pytest.fixture(scope="module")
+def model():
+    return simcore.load_target(simcore.load_scene().target)
+
+
+@pytest.fixture(scope="module")
+def initial(model) -> Controls:
+    scene = simcore.load_scene()
+    return controls_from_scene(scene, resolved_materials(model, scene))[0]
+
+
+def new_app(model) -> LmapdApp:
+    scene = simcore.with_overrides(simcore.load_scene(), SMALL)
+    app = LmapdApp(scene, engine=Engine(scene, model=model), flow_control=False, debounce_s=0.0)
+    app.state.ready()
+    settle(app)
+    return app
+
+
+def test_a_link_uses_the_command_lines_names_in_si_units(initial):
+    controls = dataclasses.replace(initial, pitch_deg=30.0, pulse_energy_mj=2.5, tnr=4.0)
+    query = dict(urllib.parse.parse_qsl(link_query(controls, initial)))
+    assert query["pitch_deg"] == "30.0" and query["tnr"] == "4.0"
+    assert query["pulse_energy_j"] == "0.0025"  # joules, as --set takes them
+    assert set(query) >= {"azimuth_deg", "distance_m", "pixels", "seed", "preset"}
+    assert not any(k.startswith("target.materials.") for k in query)  # none changed
+
+
+def test_a_link_restores_the_same_scene_and_the_same_points(model):
+    teacher = new_app(model)
+    part = teacher.engine.model.part_names[0]
+    with teacher.state:
+        teacher.state.update(
+            {
+                "pitch_deg": 23.0,
+                "azimuth_deg": -41.0,
+                "distance_m": 730.0,
+                "pulse_energy_mj": 0.07,
+                "tnr": 4.3,
+                "seed": 99,
+                "materials": {**teacher.state.materials, part: "lambertian"},
+            }
+        )
+    settle(teacher)
+    query = teacher.state.share_query
+    assert f"target.materials.{urllib.parse.quote(part)}=lambertian" in query
+    student = new_app(model)
+    student.logic.open_link(dict(urllib.parse.parse_qsl(query)))
+    settle(student)
+    assert student.state.input_message == ""
+    a, b = teacher.logic.last_frame.result, student.logic.last_frame.result
+    assert a.scene == b.scene
+    assert len(a.cloud) > 100 and np.array_equal(a.cloud.points, b.cloud.points)
+    teacher.logic.runner.close()
+    student.logic.runner.close()
+
+
+def test_every_slider_value_survives_the_round_trip_bit_for_bit(initial):
+    rng = np.random.default_rng(3)
+    for energy_mj in (float(f"{v:.3g}") for v in 10 ** rng.uniform(-2, np.log10(50), 2000)):
+        controls = dataclasses.replace(initial, pulse_energy_mj=energy_mj)
+        back, messages = controls_from_link(link_settings(controls, initial), initial)
+        assert messages == [] and back.pulse_energy_mj * 1e-3 == energy_mj * 1e-3
+
+
+@pytest.mark.parametrize(
+    ("settings", "message", "field", "value"),
+    [
+        ({"pitch_deg": "abc"}, "Pitch: 'abc' is not a number; kept 0 deg", "pitch_deg", 0.0),
+        ({"distance_m": "1e9"}, "Distance 1e+09 is outside 20 to 5000 m", "distance_m", 5000.0),
+        ({"tnr": "nan"}, "TNR: not a number; kept 5", "tnr", 5.0),
+        ({"preset": "turbo"}, "Fidelity preset: 'turbo' is not one of", "preset", "interactive"),
+        ({"rm -rf": "1"}, "Link: unknown setting 'rm -rf'; ignored", "pixels", 256),
+        ({"target.materials.nope": "lambertian"}, "the target has no part 'nope'", "tnr", 5.0),
+    ],
+)
+def test_a_tampered_setting_falls_back_with_a_message_naming_it(
+    initial, settings, message, field, value
+):
+    controls, messages = controls_from_link(settings, initial)
+    assert any(message in m for m in messages), messages
+    assert getattr(controls, field) == value
+
+
+def test_a_link_with_too_many_settings_or_no_mapping_is_ignored_whole(initial):
+    many = {f"k{i}": "1" for i in range(MAX_LINK_SETTINGS + 1)}
+    assert controls_from_link(many, initial) == (
+        initial,
+        [f"Link: {len(many)} settings is too many; ignored"],
+    )
+    assert controls_from_link(["pitch_deg", 3], initial)[0] == initial
+
+
+@settings(
+    max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    st.dictionaries(
+        st.one_of(
+            st.sampled_from(
+                ["pitch_deg", "pixels", "pulse_energy_j", "preset", "fidelity.subrays", "seed"]
+            ),
+            st.text(max_size=30),
+        ),
+        st.one_of(st.text(max_size=60), st.integers(), st.floats(), st.none(), st.booleans()),
+        max_size=12,
+    )
+)
+def test_any_query_gives_valid_controls_and_never_raises(initial, settings):
+    controls, messages = controls_from_link(settings, initial)
+    assert isinstance(controls, Controls) and all(
+        isinstance(m, str) and len(m) < 300 for m in messages
+    )
+    scene = scene_from_controls(simcore.load_scene(), controls)  # the core accepts it
+    assert 16 <= scene.detector.pixels <= 512

@@ -18,6 +18,7 @@ from typing import Any
 
 import simcore
 from app.engine import Engine, Frame, Request
+from app.logic import exports
 from app.logic.controls import ControlPanel
 from app.logic.flyaround import FlyaroundLogic
 from app.logic.links import controls_from_link, link_query
@@ -90,6 +91,9 @@ class AppLogic:
         server.trigger("frame_shown")(self.on_frame_shown)
         server.trigger("reset_controls")(self.reset_controls)
         server.trigger("open_link")(self.open_link)
+        server.trigger("export_cloud")(self.export_cloud)
+        server.trigger("export_waveforms")(self.export_waveforms)
+        server.trigger("export_scene")(self.export_scene)
         server.controller.on_server_exited.add(lambda **_: self.runner.close())
 
     @property
@@ -208,6 +212,33 @@ class AppLogic:
         )
         with self.state:
             self.state.update({**controls.as_state(), "input_message": "; ".join(messages)})
+
+    # -- downloads (the page's utils.download saves what these return) --------------------------
+    def export_cloud(self, fmt: Any = "ply", *_: Any, **__: Any) -> Any:
+        """The shown frame's point cloud as PLY or LAS bytes (a binary attachment)."""
+        made = self._export(lambda result: exports.cloud_file(result, fmt))
+        return None if made is None else self.server.protocol.addAttachment(memoryview(made))
+
+    def export_waveforms(self, *_: Any, **__: Any) -> str | None:
+        """The selected pixels' waveforms of the shown frame as CSV text."""
+        return self._export(
+            lambda result: exports.waveforms_csv(result, self.state.selected_pixels or [])
+        )
+
+    def export_scene(self, *_: Any, **__: Any) -> str | None:
+        """The shown frame's scene as TOML text (``lmapd simulate`` gives the same points)."""
+        return self._export(exports.scene_toml)
+
+    def _export(self, make) -> Any:
+        """``make(result)``'s content for the shown frame, or None with a message on the page."""
+        if self.last_frame is None:
+            self.state.error_message = "Download: no frame yet"
+            return None
+        try:
+            return make(self.last_frame.result)
+        except exports.ExportError as exc:
+            self.state.error_message = f"Download: {exc}"
+            return None
 
     def reset_controls(self, *_: Any, **__: Any) -> None:
         """Back to the scene the app started with (the paper scene unless --scene was given)."""

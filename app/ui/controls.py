@@ -201,6 +201,52 @@ def share_panel() -> None:
                 )
 
 
+DOWNLOADS = (  # (button text, file name, trigger call, MIME type, CSS class)
+    (
+        "Cloud PLY",
+        "lmapd-cloud.ply",
+        "trigger('export_cloud', ['ply'])",
+        "application/octet-stream",
+        "export-ply",
+    ),
+    (
+        "Cloud LAS",
+        "lmapd-cloud.las",
+        "trigger('export_cloud', ['las'])",
+        "application/octet-stream",
+        "export-las",
+    ),
+    (
+        "Waveforms CSV",
+        "lmapd-waveforms.csv",
+        "trigger('export_waveforms')",
+        "text/csv",
+        "export-csv",
+    ),
+    (
+        "Scene TOML",
+        "lmapd-scene.toml",
+        "trigger('export_scene')",
+        "application/toml",
+        "export-toml",
+    ),
+)
+
+
+def downloads() -> None:
+    """Download buttons: the shown frame's cloud, the selected pixels' waveforms, the scene."""
+    with html.Div(classes="control d-flex flex-wrap ga-1 downloads"):
+        for text, name, call, mime, css in DOWNLOADS:
+            v3.VBtn(
+                text,
+                prepend_icon="mdi-download",
+                size="x-small",
+                variant="tonal",
+                click=f"trame.utils.lmapdLink.save('{name}', {call}, '{mime}')",
+                classes=css,
+            )
+
+
 def section(title: str) -> None:
     html.Div(title, classes="section-title text-overline")
 
@@ -233,6 +279,8 @@ def drawer_content() -> None:
         share_panel()
         section("Display")
         display_choices()
+        section("Download (the frame shown)")
+        downloads()
         html.Div(
             "3D views: drag to rotate, scroll or right-drag to zoom, middle- or Alt-drag to "
             "pan; the camera icon resets the view. Sliders update the views while you drag; "

@@ -93,6 +93,11 @@ window.trame.utils.lmapdLink = {
     if (navigator.clipboard) navigator.clipboard.writeText(text).catch(() => {});
     return text;
   },
+  save(name, pending, type) {  // a download, unless the server refused it (null, with a message)
+    Promise.resolve(pending).then((data) => {
+      if (data !== null && data !== undefined) window.trame.utils.download(name, data, type);
+    });
+  },
 };
 (() => {
   const settings = new URLSearchParams(window.location.search);

@@ -229,6 +229,37 @@ def echo_features(
     )
 
 
+def sample_echoes(shape: PulseShape, table: np.ndarray, arrivals_s, weights, t0_s, dt_s, n_samples):
+    """Each pixel's echo sum_k w_k p(t - t_k) at t = t0_s + j dt_s, j < n_samples, p the pulse
+    table ``table`` (``shape.filtered``, ``shape.raw`` or ``shape.shot``), by the compiled
+    kernel where it is available.
+
+    arrivals_s, weights : (n, K); t0_s : (n,) [s]. Returns (n, n_samples) float64.
+    """
+    arrivals = np.asarray(arrivals_s, dtype=np.float64)
+    weights = np.asarray(weights, dtype=np.float64)
+    t0 = np.broadcast_to(np.asarray(t0_s, dtype=np.float64), (len(arrivals),))
+    out = np.zeros((len(arrivals), int(n_samples)))
+    kernel = compiled_kernel()
+    if kernel is not None:
+        kernel.set_threads(parallel.threads())
+        rows = np.arange(len(arrivals))
+        zero = np.zeros(len(arrivals), dtype=np.int64)
+        slope = shape.slope_of(table)
+        kernel.sample_echoes(
+            out, rows, zero, t0, zero, zero + int(n_samples), dt_s, arrivals, weights, table,
+            slope, shape,
+        )  # fmt: skip
+        return out
+    step = max(1, (1 << 22) // max(int(n_samples) * arrivals.shape[1], 1))
+    offsets = dt_s * np.arange(int(n_samples))
+    for c in range(0, len(arrivals), step):
+        sl = slice(c, c + step)
+        tau = (t0[sl, None] + offsets[None, :])[:, :, None] - arrivals[sl, None, :]
+        out[sl] = np.einsum("nlk,nk->nl", shape.lookup(table, tau), weights[sl])
+    return out
+
+
 def window_begin_s(shape: PulseShape, n_elements: int, dt_s: float) -> float:
     """Start of the sampled window of an echo of ``n_elements`` elements, from its first arrival
     [s]: where the pulse is below 0.4 / K of its peak, y there is at most 0.4/K sum(w) p_max,

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import os
+import threading
 import warnings
 from dataclasses import dataclass
 from types import ModuleType
@@ -16,6 +17,26 @@ from ..pulse import PulseShape
 NO_KERNEL_ENV = "LMAPD_NO_NUMBA"
 _KERNEL: list[ModuleType | None] = []  # the kernel module once loaded (None: unavailable)
 _NO_KERNEL = [""]  # why not
+_PRELOAD: list[threading.Thread] = []
+
+
+def preload(shape: PulseShape) -> None:
+    """Load the compiled kernel on a background thread (a frame's first stages run meanwhile;
+    the echo stage then waits for it): the import of numba and the functions read from the
+    on-disk cache take 0.2-0.5 s. Nothing where the kernel is not to be used or already loaded."""
+    if _KERNEL or _PRELOAD or os.environ.get(NO_KERNEL_ENV, "0").strip() not in ("", "0"):
+        return
+
+    def load():
+        try:
+            from . import kernel  # noqa: PLC0415
+
+            kernel.warm(shape)
+        except Exception:  # noqa: BLE001, S110  (compiled_kernel() says why, on use)
+            pass
+
+    _PRELOAD.append(threading.Thread(target=load, name="simcore-kernel", daemon=True))
+    _PRELOAD[0].start()
 
 
 def compiled_kernel() -> ModuleType | None:
@@ -23,6 +44,8 @@ def compiled_kernel() -> ModuleType | None:
     ``$LMAPD_NO_NUMBA`` is set (not 0) or numba cannot be imported: the echoes then take the
     numpy path, with a one-line warning the first time."""
     if not _KERNEL:
+        if _PRELOAD:
+            _PRELOAD[0].join()
         reason = ""
         if os.environ.get(NO_KERNEL_ENV, "0").strip() not in ("", "0"):
             reason = f"${NO_KERNEL_ENV} is set"

@@ -256,6 +256,16 @@ def _features(
             out[p, i] = f[i]
 
 
+_NONE = np.zeros(0)
+_NONE.setflags(write=False)  # read-only as the pulse's tables: one compiled variant for both
+
+
+def warm(shape) -> None:
+    """Load (or compile) the functions a frame calls, on a one-pixel echo of ``shape``."""
+    one = np.full((1, 1), 1e-6), np.ones((1, 1))
+    echo_features(shape, *one, 4e-10, 2e-9, 0.5, False, np.full(2, -1e-8), (1, 1))
+
+
 def echo_features(
     shape, arrivals_s, weights, dt_s, cfd_delay_s, cfd_fraction, raw_peak, begin, steps
 ):
@@ -264,7 +274,7 @@ def echo_features(
     shape : simcore.pulse.PulseShape; arrivals_s, weights : (n, K) float64 (weight 0: none);
     begin : (K + 1,) window start before the first arrival by element count [s];
     steps : (half-maximum, CFD) Illinois steps (simcore.echo.features.HALF_STEPS, CFD_STEPS)."""
-    raw = (shape.raw, shape.raw_slope) if raw_peak else (np.zeros(0), np.zeros(0))
+    raw = (shape.raw, shape.raw_slope) if raw_peak else (_NONE, _NONE)
     tables = (shape.filtered, shape.filtered_slope, *raw, shape.shot, shape.shot_slope)
     span = shape.t_peak_s + cfd_delay_s - begin + 3 * dt_s
     out = np.empty((len(arrivals_s), 7))

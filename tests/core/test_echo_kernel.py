@@ -130,6 +130,7 @@ def fresh_loader(monkeypatch):
     """The kernel loader as in a new process (restored afterwards)."""
     monkeypatch.setattr(features, "_KERNEL", [])
     monkeypatch.setattr(features, "_NO_KERNEL", [""])
+    monkeypatch.setattr(features, "_PRELOAD", [])
 
 
 @pytest.mark.parametrize("how", ["env", "import"])

@@ -139,12 +139,14 @@ def write_json(path: str | Path, data: dict) -> None:
         tmp.write_text(text + "\n", encoding="utf-8")
 
 
-def waveform_cube(result, max_elements: int = 1 << 22) -> dict[str, np.ndarray]:
+def waveform_cube(result) -> dict[str, np.ndarray]:
     """Every lit pixel's band-limited and raw echo on a common-length window.
 
     Returns a dict: row, col (n,), t0_s (n,) start time of each row, dt_s, power_w and
     filtered_w (n, L) [W], t_half_s (n,), range_m (n,) (NaN where not detected).
     """
+    from .echo.features import sample_echoes  # noqa: PLC0415  (the kernel, loaded on use)
+
     e = result.echo
     energy = result.scene.laser.pulse_energy_j
     has = e.weights > 0
@@ -159,25 +161,17 @@ def waveform_cube(result, max_elements: int = 1 << 22) -> dict[str, np.ndarray]:
         )
         + 1
     )
-    n, k = e.weights.shape
     t0 = t_first + e.shape.t_start_s
-    raw = np.zeros((n, length))
-    filt = np.zeros((n, length))
-    step = max(1, max_elements // (length * max(k, 1)))
-    offsets = e.dt_s * np.arange(length)
-    for c in range(0, n, step):
-        sl = slice(c, c + step)
-        tau = (t0[sl, None] + offsets[None, :])[:, :, None] - e.arrivals_s[sl, None, :]
-        raw[sl] = np.einsum("nlk,nk->nl", e.shape.raw_at(tau), e.weights[sl]) * energy
-        filt[sl] = np.einsum("nlk,nk->nl", e.shape.filtered_at(tau), e.weights[sl]) * energy
+    raw = sample_echoes(e.shape, e.shape.raw, e.arrivals_s, e.weights, t0, e.dt_s, length)
+    filt = sample_echoes(e.shape, e.shape.filtered, e.arrivals_s, e.weights, t0, e.dt_s, length)
     p = result.pixels
     return {
         "row": (e.pixel // p).astype(np.int32),
         "col": (e.pixel % p).astype(np.int32),
         "t0_s": t0,
         "dt_s": np.float64(e.dt_s),
-        "power_w": raw.astype(np.float32),
-        "filtered_w": filt.astype(np.float32),
+        "power_w": (raw * energy).astype(np.float32),
+        "filtered_w": (filt * energy).astype(np.float32),
         "t_half_s": e.features.t_half_s,
         "range_m": result.detection.range_m,
         "reference_t_half_s": np.float64(e.shape.t_half_s),

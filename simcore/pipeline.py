@@ -15,8 +15,10 @@ from typing import Any
 
 from . import parallel
 from .echo import ECHO
+from .echo.features import preload
 from .geometry import HITS, RAYS, TARGET
 from .pointcloud import CLOUD
+from .pulse import scene_pulse_shape
 from .receivers import DETECTION, RECEIVER
 from .result import Result, Waveform
 from .scene import Scene, SceneError, with_overrides
@@ -56,6 +58,8 @@ class Pipeline:
         outputs: dict[str, Any] = {}
         keys: dict[str, tuple] = {}
         timings: dict[str, float] = {}
+        if "echo" not in self._cache:  # the first frame: the echo kernel loads meanwhile
+            preload(scene_pulse_shape(scene))
         with parallel.blas_serial():
             for stage in CHAIN:
                 keys[stage.name] = (stage.reads(scene), *(keys[u] for u in stage.upstream))

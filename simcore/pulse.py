@@ -116,6 +116,10 @@ class PulseShape:
         x += table[i]
         return x.reshape(shape)
 
+    def slope_of(self, table: np.ndarray) -> np.ndarray:
+        """The next-sample differences of ``filtered``, ``raw`` or ``shot``."""
+        return self._slopes[id(table)]
+
     @property
     def _slopes(self) -> dict[int, np.ndarray]:
         return {

@@ -3,7 +3,8 @@ echo stage. All waveforms here are per joule of pulse energy: the received power
 with the energy, so a pulse-energy change never re-runs this stage.
 
 ``elements``  illumination gain and Eq. 30 weights; splitting and merging elements
-``features``  peak, half-maximum time and CFD slope of each echo (exact delays, pair tables)
+``features``  peak, half-maximum time and CFD slope of each echo (exact delays): the compiled
+              kernel where numba is available (``kernel``), else the numpy path
 ``stage``     the echo stage: what it hands a receiver (:class:`EchoStage`), its declaration
 
 The pulse itself (Eq. 1, the band limit) is ``simcore.pulse``; its names are re-exported here.
@@ -21,20 +22,18 @@ from ..pulse import (
     pulse_shape,
 )
 from .elements import element_weights, illumination_gain, merge_elements, split_elements
-from .features import PAIR_NODES, PAIR_REACH, EchoFeatures, PairTable, echo_features
+from .features import EchoFeatures, compiled_kernel, echo_features
 from .stage import ECHO, EchoStage, echo_waveform, stage_echo
 
 __all__ = [
     "A_FWHM",
     "A_PAPER",
     "ECHO",
-    "PAIR_NODES",
-    "PAIR_REACH",
     "EchoFeatures",
     "EchoStage",
-    "PairTable",
     "PulseShape",
     "band_limit_sigma_s",
+    "compiled_kernel",
     "default_time_step_s",
     "echo_features",
     "echo_waveform",

@@ -3,12 +3,62 @@
 
 from __future__ import annotations
 
+import os
+import threading
+import warnings
 from dataclasses import dataclass
+from types import ModuleType
 
 import numpy as np
 
 from .. import parallel
 from ..pulse import PulseShape
+
+NO_KERNEL_ENV = "LMAPD_NO_NUMBA"
+_KERNEL: list[ModuleType | None] = []  # the kernel module once loaded (None: unavailable)
+_NO_KERNEL = [""]  # why not
+_PRELOAD: list[threading.Thread] = []
+
+
+def preload(shape: PulseShape) -> None:
+    """Load the compiled kernel on a background thread (a frame's first stages run meanwhile;
+    the echo stage then waits for it): the import of numba and the functions read from the
+    on-disk cache take 0.2-0.5 s. Nothing where the kernel is not to be used or already loaded."""
+    if _KERNEL or _PRELOAD or os.environ.get(NO_KERNEL_ENV, "0").strip() not in ("", "0"):
+        return
+
+    def load():
+        try:
+            from . import kernel  # noqa: PLC0415
+
+            kernel.warm(shape)
+        except Exception:  # noqa: BLE001, S110  (compiled_kernel() says why, on use)
+            pass
+
+    _PRELOAD.append(threading.Thread(target=load, name="simcore-kernel", daemon=True))
+    _PRELOAD[0].start()
+
+
+def compiled_kernel() -> ModuleType | None:
+    """The compiled echo kernel (:mod:`simcore.echo.kernel`, loaded on first use), or None where
+    ``$LMAPD_NO_NUMBA`` is set (not 0) or numba cannot be imported: the echoes then take the
+    numpy path, with a one-line warning the first time."""
+    if not _KERNEL:
+        if _PRELOAD:
+            _PRELOAD[0].join()
+        reason = ""
+        if os.environ.get(NO_KERNEL_ENV, "0").strip() not in ("", "0"):
+            reason = f"${NO_KERNEL_ENV} is set"
+        else:
+            try:
+                from . import kernel  # noqa: PLC0415  (numba: 0.2 s to import)
+            except Exception as exc:  # noqa: BLE001  (any failure to load: the numpy path)
+                reason = f"numba unavailable ({type(exc).__name__}: {exc})"
+        if reason:
+            _NO_KERNEL[0] = reason
+            warnings.warn(f"echo features on the numpy path: {reason}", stacklevel=3)
+        _KERNEL.append(None if reason else kernel)
+    return _KERNEL[0]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -40,6 +90,29 @@ def _eval_exact(shape: PulseShape, table, arrivals, weights, t):
     return np.einsum("nk,nk->n", weights, shape.lookup(table, t[:, None] - arrivals))
 
 
+# Illinois steps (regula falsi that halves the stale end's value) refining the half-maximum and
+# CFD crossings within their one-sample brackets: plain regula falsi keeps one end fixed where the
+# echo bends, and stalled up to 1.5 mm from the crossing on multi-surface pixels after 4 steps
+HALF_STEPS = 8
+CFD_STEPS = 6
+
+
+def _illinois(f, ta, tb, fa, fb, steps: int):
+    """Root of f in [ta, tb] (fa = f(ta) < 0 <= fb = f(tb), arrays), after ``steps`` Illinois
+    steps; the final secant point."""
+    side = np.zeros(np.shape(ta), dtype=np.int8)  # the end moved last: -1 a, +1 b
+    for _ in range(steps):
+        tm = np.clip(ta - fa * (tb - ta) / np.where(fb != fa, fb - fa, 1.0), ta, tb)
+        fm = f(tm)
+        left = fm < 0
+        fb = np.where(left & (side == -1), 0.5 * fb, fb)
+        fa = np.where(~left & (side == 1), 0.5 * fa, fa)
+        ta, fa = np.where(left, tm, ta), np.where(left, fm, fa)
+        tb, fb = np.where(left, tb, tm), np.where(left, fb, fm)
+        side = np.where(left, -1, 1).astype(np.int8)
+    return ta - fa * (tb - ta) / np.where(fb != fa, fb - fa, 1.0)
+
+
 def _refined_peak(shape, table, arrivals, weights, grid, y, dt_s):
     """Peak of each row of y: best sample, parabolic vertex, exact value there."""
     rows = np.arange(len(y))
@@ -67,20 +140,14 @@ def _features_chunk(
 
     peak = _refined_peak(shape, shape.filtered, arrivals, weights, grid, y, dt_s)
 
-    # half-maximum crossing: bracket on the grid, then regula falsi on exact values
+    # half-maximum crossing: bracket on the grid, then Illinois steps on exact values
     half = 0.5 * peak
     jh = np.argmax(y >= half[:, None], axis=1)
     jh = np.maximum(jh, 1)
     ta, tb = grid[rows, jh - 1], grid[rows, jh]
     fa, fb = y[rows, jh - 1] - half, y[rows, jh] - half
-    for _ in range(4):
-        tm = ta - fa * (tb - ta) / np.where(fb != fa, fb - fa, 1.0)
-        tm = np.clip(tm, ta, tb)
-        fm = _eval_exact(shape, shape.filtered, arrivals, weights, tm) - half
-        left = fm < 0
-        ta, fa = np.where(left, tm, ta), np.where(left, fm, fa)
-        tb, fb = np.where(left, tb, tm), np.where(left, fb, fm)
-    t_half = ta - fa * (tb - ta) / np.where(fb != fa, fb - fa, 1.0)
+    exact = lambda t: _eval_exact(shape, shape.filtered, arrivals, weights, t)  # noqa: E731
+    t_half = _illinois(lambda t: exact(t) - half, ta, tb, fa, fb, HALF_STEPS)
 
     # CFD signal on the grid: y(t - cfd_delay_s) by a fractional shift of the samples
     shift = cfd_delay_s / dt_s
@@ -107,18 +174,11 @@ def _features_chunk(
     last = np.maximum(n_samples - 1 - np.argmax(cand[:, ::-1], axis=1), 1)
     found = cand.any(axis=1)
     norm = np.where(peak > 0, peak, 1.0)
-    exact = lambda t: _eval_exact(shape, shape.filtered, arrivals, weights, t)  # noqa: E731
     cfd = lambda t: (exact(t - cfd_delay_s) - cfd_fraction * exact(t)) / norm  # noqa: E731
-    # the crossing: linear on the grid, then secant steps on the exact CFD signal
+    # the crossing: bracketed on the grid, then Illinois steps on the exact CFD signal
     sa, sb = s[rows, last - 1], s[rows, last]
     ta, tb = grid[rows, last - 1], grid[rows, last]
-    for _ in range(3):
-        tm = np.clip(ta - sa * (tb - ta) / np.where(sb != sa, sb - sa, 1.0), ta, tb)
-        sm = cfd(tm)
-        left = sm < 0
-        ta, sa = np.where(left, tm, ta), np.where(left, sm, sa)
-        tb, sb = np.where(left, tb, tm), np.where(left, sb, sm)
-    t_star = ta - sa * (tb - ta) / np.where(sb != sa, sb - sa, 1.0)
+    t_star = _illinois(cfd, ta, tb, sa, sb, CFD_STEPS)
     h = 1e-3 * dt_s  # exact derivatives by central differences
     slope_cfd = (cfd(t_star + h) - cfd(t_star - h)) / (2 * h)
     slope_half = (exact(t_half + h) - exact(t_half - h)) / (2 * h) / norm
@@ -142,110 +202,126 @@ def echo_features(
     cfd_delay_s: float,
     cfd_fraction: float,
     raw_peak: bool = False,
-    max_elements: int = 1 << 20,
+    backend: str | None = None,
 ) -> EchoFeatures:
     """Peak, half-maximum time and CFD slope of each pixel's band-limited echo.
 
-    A pixel lit by one element echoes the reference pulse, shifted and scaled: its features are
-    the pulse's own, found once. The others are sampled at ``dt_s`` on their own window, from just
-    before the first arrival to past the last arrival's peak plus the CFD delay (their depth plus
-    the pulse), never the whole gate. Each pixel's contributing elements are moved to the front
-    and pixels are grouped by element count and window length, in chunks of at most
-    ``max_elements`` (pixels x samples x elements) so that memory stays bounded.
+    Each pixel is sampled at ``dt_s`` on its own window, from just before its first arrival to
+    past its last arrival's peak plus the CFD delay (its depth plus the pulse), never the whole
+    gate; then each mark is refined on exact values (docs/physics.md#echo).
 
     arrivals_s, weights : (n, K) -- two-way delays [s] and Eq. 30 weights (0 = no contribution)
+    backend : "kernel" (the compiled kernel, :mod:`simcore.echo.kernel`), "numpy" (the reference
+        it is tested against: array passes over groups of pixels) or None: the kernel where numba
+        is available (see :func:`compiled_kernel`), else numpy.
     """
     arrivals = np.asarray(arrivals_s, dtype=np.float64)
     weights = np.asarray(weights, dtype=np.float64)
-    n = len(arrivals)
-    has = weights > 0
-    count = has.sum(axis=1)
-    peak = np.zeros(n)
-    t_half = np.zeros(n)
-    slope = np.zeros(n)
-    level = np.zeros((n, 3))
-    peak_raw = np.zeros(n) if raw_peak else None
-
-    single = np.flatnonzero(count == 1)
-    if len(single):
-        j = np.argmax(has[single], axis=1)
-        w, t = weights[single, j], arrivals[single, j]
-        one = _single_element(shape, dt_s, cfd_delay_s, cfd_fraction, raw_peak)
-        peak[single], t_half[single], slope[single] = w * one[0], t + one[1], one[2]
-        level[single] = one[4:7]
-        if raw_peak:
-            peak_raw[single] = w * one[3]
-
-    two = np.flatnonzero(count == 2)
-    if len(two):
-        table = _pair_table(shape, dt_s, cfd_delay_s, cfd_fraction, raw_peak)
-        t1, t2, w1, w2 = _pair_elements(arrivals[two], weights[two], has[two])
-        close = t2 - t1 <= table.max_separation_s
-        sel = two[close]
-        w = w1[close] + w2[close]
-        out = table.features(t2[close] - t1[close], w1[close] / w)
-        peak[sel], t_half[sel], slope[sel] = w * out[0], t1[close] + out[1], out[2]
-        level[sel] = np.stack(out[4:7], axis=1)
-        if raw_peak:
-            peak_raw[sel] = w * out[3]
-        count = count.copy()
-        count[sel] = 0  # done
-
-    multi = np.flatnonzero(count > 1)
-    if len(multi):
-        order = np.argsort(~has[multi], axis=1, kind="stable")  # contributions first
-        arr = np.take_along_axis(arrivals[multi], order, axis=1)
-        wts = np.take_along_axis(weights[multi], order, axis=1)
-        width = _bucket_counts(count[multi])
-        threaded = int(np.sum(width)) * 64 > _THREAD_MIN_ELEMENTS  # ~64 samples per window
-        jobs = []
-        pending = np.zeros(0, np.int64)
-        for k in np.unique(width):  # element counts up to a power of two, small groups padded
-            pending = np.concatenate([pending, np.flatnonzero(width == k)])
-            if len(pending) >= 256 or k == width.max():
-                a, w, p = arr[pending, :k], wts[pending, :k], multi[pending]
-                jobs += _jobs(shape, a, w, p, dt_s, cfd_delay_s, max_elements, threaded)
-                pending = pending[:0]
-
-        def work(job):
-            pixels, args = job
-            return pixels, _features_chunk(shape, *args, cfd_fraction, raw_peak)
-
-        # numpy releases the GIL in these array passes: two threads use both cores, when the work
-        # is large enough to repay starting them
-        if threaded:
-            outputs = parallel.map_threads(work, jobs)
-        else:
-            outputs = [work(job) for job in jobs]
-        for sel, out in outputs:
-            peak[sel], t_half[sel], slope[sel] = out[0], out[1], out[2]
-            level[sel] = np.stack(out[4:7], axis=1)
-            if raw_peak:
-                peak_raw[sel] = out[3]
+    if backend not in (None, "kernel", "numpy"):
+        raise ValueError(f"backend must be 'kernel', 'numpy' or None, got {backend!r}")
+    if arrivals.shape != weights.shape or arrivals.ndim != 2:
+        raise ValueError(f"arrivals_s {arrivals.shape} and weights {weights.shape}: (n, K) each")
+    if not np.isfinite(weights).all() or (weights < 0).any():
+        raise ValueError("weights must be finite and >= 0")
+    if not np.isfinite(arrivals[weights > 0]).all():
+        raise ValueError("arrivals_s must be finite where the weight is > 0")
+    kernel = compiled_kernel() if backend != "numpy" else None
+    if backend == "kernel" and kernel is None:
+        raise RuntimeError(f"the compiled echo kernel is unavailable: {_NO_KERNEL[0]}")
+    k_max = arrivals.shape[1]
+    # the window's start by element count, rounded up to a power of two as the numpy path grouped
+    # pixels before the kernel (so the samples fall where they fell)
+    buckets = 2 ** np.ceil(np.log2(np.maximum(np.arange(k_max + 1), 1))).astype(np.int64)
+    begin = np.array([window_begin_s(shape, int(k), dt_s) for k in buckets])
+    if kernel is not None:
+        kernel.set_threads(parallel.threads())
+        out = kernel.echo_features(
+            shape, arrivals, weights, dt_s, cfd_delay_s, cfd_fraction, raw_peak, begin,
+            (HALF_STEPS, CFD_STEPS),
+        )  # fmt: skip
+    else:
+        out = features_numpy(
+            shape, arrivals, weights, dt_s, cfd_delay_s, cfd_fraction, raw_peak, begin
+        )
     return EchoFeatures(
-        peak_w_per_j=peak,
-        t_half_s=t_half,
-        cfd_slope_per_s=slope,
-        peak_raw_w_per_j=peak_raw,
-        cfd_shot_level=level,
+        peak_w_per_j=out[:, 0],
+        t_half_s=out[:, 1],
+        cfd_slope_per_s=out[:, 2],
+        peak_raw_w_per_j=out[:, 3] if raw_peak else None,
+        cfd_shot_level=out[:, 4:7],
     )
 
 
-def _jobs(
-    shape, arrivals, weights, pixel, dt_s, cfd_delay_s, max_elements, threaded=False
-) -> list[tuple]:
-    """Chunks (pixel, the arguments of _features_chunk up to t_begin) of pixels with k elements
-    each (contributing or of weight 0), grouped by window length (at least one chunk per thread
-    if ``threaded``)."""
-    k = arrivals.shape[1]
+def sample_echoes(shape: PulseShape, table: np.ndarray, arrivals_s, weights, t0_s, dt_s, n_samples):
+    """Each pixel's echo sum_k w_k p(t - t_k) at t = t0_s + j dt_s, j < n_samples, p the pulse
+    table ``table`` (``shape.filtered``, ``shape.raw`` or ``shape.shot``), by the compiled
+    kernel where it is available.
+
+    arrivals_s, weights : (n, K); t0_s : (n,) [s]. Returns (n, n_samples) float64.
+    """
+    arrivals = np.asarray(arrivals_s, dtype=np.float64)
+    weights = np.asarray(weights, dtype=np.float64)
+    t0 = np.broadcast_to(np.asarray(t0_s, dtype=np.float64), (len(arrivals),))
+    out = np.zeros((len(arrivals), int(n_samples)))
+    kernel = compiled_kernel()
+    if kernel is not None:
+        kernel.set_threads(parallel.threads())
+        rows = np.arange(len(arrivals))
+        zero = np.zeros(len(arrivals), dtype=np.int64)
+        slope = shape.slope_of(table)
+        kernel.sample_echoes(
+            out, rows, zero, t0, zero, zero + int(n_samples), dt_s, arrivals, weights, table,
+            slope, shape,
+        )  # fmt: skip
+        return out
+    step = max(1, (1 << 22) // max(int(n_samples) * arrivals.shape[1], 1))
+    offsets = dt_s * np.arange(int(n_samples))
+    for c in range(0, len(arrivals), step):
+        sl = slice(c, c + step)
+        tau = (t0[sl, None] + offsets[None, :])[:, :, None] - arrivals[sl, None, :]
+        out[sl] = np.einsum("nlk,nk->nl", shape.lookup(table, tau), weights[sl])
+    return out
+
+
+def window_begin_s(shape: PulseShape, n_elements: int, dt_s: float) -> float:
+    """Start of the sampled window of an echo of ``n_elements`` elements, from its first arrival
+    [s]: where the pulse is below 0.4 / K of its peak, y there is at most 0.4/K sum(w) p_max,
+    below half of max(y) >= max_k(w_k) p_max >= sum(w)/K p_max. Capped at 10 % and two samples
+    early, so that the CFD's delayed copy exists around its crossing."""
+    return shape.rising_time_s(min(0.4 / n_elements, 0.1)) - 2 * dt_s
+
+
+def features_numpy(
+    shape, arrivals, weights, dt_s, cfd_delay_s, cfd_fraction, raw_peak, begin, max_elements=1 << 20
+) -> np.ndarray:
+    """The numpy path: (n, 7) features as :func:`simcore.echo.kernel.echo_features` gives them.
+
+    Pixels are grouped by their count of contributing elements (moved to the front), then in
+    chunks of at most ``max_elements`` (pixels x samples x elements) by window length, each
+    chunk sampled on its longest window."""
+    n = len(arrivals)
+    out = np.zeros((n, 7))
     has = weights > 0
-    t_first = np.where(has, arrivals, np.inf).min(axis=1)
-    t_last = np.where(has, arrivals, -np.inf).max(axis=1)
-    arrivals = np.where(has, arrivals, t_first[:, None])  # keep lookups in range
-    # Each window starts where the pulse is below 0.4 / k of its peak: y there is at most
-    # 0.4/k sum(w) p_max, below half of max(y) >= max_k(w_k) p_max >= sum(w)/k p_max. Capped at
-    # 10 % and two samples early, so that the CFD's delayed copy exists around its crossing.
-    t_begin = shape.rising_time_s(min(0.4 / k, 0.1)) - 2 * dt_s
+    count = has.sum(axis=1)
+    order = np.argsort(~has, axis=1, kind="stable")  # contributions first
+    arr = np.take_along_axis(arrivals, order, axis=1)
+    wts = np.take_along_axis(weights, order, axis=1)
+    for k in np.unique(count[count > 0]):
+        rows = np.flatnonzero(count == k)
+        for pixels, args in _jobs(shape, arr[rows, :k], wts[rows, :k], rows, dt_s, cfd_delay_s,
+                                  begin[k], max_elements):  # fmt: skip
+            for i, v in enumerate(_features_chunk(shape, *args, cfd_fraction, raw_peak)):
+                if v is not None:
+                    out[pixels, i] = v
+    return out
+
+
+def _jobs(shape, arrivals, weights, pixel, dt_s, cfd_delay_s, t_begin, max_elements) -> list:
+    """Chunks (pixel, the arguments of _features_chunk up to t_begin) of pixels with k
+    contributing elements each, grouped by window length."""
+    k = arrivals.shape[1]
+    t_first = arrivals.min(axis=1)
+    t_last = arrivals.max(axis=1)
     span = shape.t_peak_s + cfd_delay_s - t_begin + 3 * dt_s
     n_samples = np.ceil((t_last - t_first + span) / dt_s).astype(np.int64) + 2
     # chunks of pixels sorted by window length, each sampled on its longest window (at most
@@ -253,12 +329,11 @@ def _jobs(
     # passes (the per-pass overhead dominates small ones), little padding
     order = np.argsort(n_samples, kind="stable")
     n_samples = n_samples[order]
-    cap = -(-len(order) // parallel.threads()) if threaded else len(order)
     jobs = []
     i = 0
     while i < len(order):
         j = int(np.searchsorted(n_samples, 1.5 * n_samples[i], side="right"))
-        j = min(max(j, i + 512), i + cap, len(order))
+        j = min(max(j, i + 512), len(order))
         while j > i + 1 and (j - i) * int(n_samples[j - 1]) * k > max_elements:
             j = i + max(1, min(j - i - 1, max_elements // (int(n_samples[j - 1]) * k)))
         sel = order[i:j]
@@ -271,111 +346,3 @@ def _jobs(
         )
         i = j
     return jobs
-
-
-_SINGLE: dict[tuple, tuple] = {}
-_PAIRS: dict[tuple, PairTable] = {}
-
-
-def _pair_elements(arrivals, weights, has):
-    """The two contributing elements of each row, earlier first: t1, t2, w1, w2 (each (n,))."""
-    k = arrivals.shape[1]
-    i = np.argmax(has, axis=1)
-    j = k - 1 - np.argmax(has[:, ::-1], axis=1)
-    rows = np.arange(len(arrivals))
-    ta, tb, wa, wb = arrivals[rows, i], arrivals[rows, j], weights[rows, i], weights[rows, j]
-    swap = tb < ta
-    return (
-        np.where(swap, tb, ta),
-        np.where(swap, ta, tb),
-        np.where(swap, wb, wa),
-        np.where(swap, wa, wb),
-    )
-
-
-@dataclass(frozen=True)
-class PairTable:
-    """Features of the two-element echo (weights q, 1 - q at delays 0 and d) on a grid of
-    separations d in [0, max_separation_s] and shares q in [0, 1], bilinearly interpolated. A
-    two-element echo of total weight W at t1, t2 has peak W P(d, q), half-maximum t1 + T(d, q) and
-    CFD slope S(d, q) and shot levels L (the normalised CFD signal does not scale with W)."""
-
-    max_separation_s: float
-    grid: tuple  # (P, T, S, R, L_d, L_p, L_m) arrays (n_d, n_q); R (raw peak) or None
-
-    def features(self, d, q) -> tuple:
-        n_d, n_q = self.grid[0].shape
-        x = np.clip(d / self.max_separation_s, 0.0, 1.0) * (n_d - 1)
-        y = np.clip(q, 0.0, 1.0) * (n_q - 1)
-        i = np.minimum(x.astype(np.int64), n_d - 2)
-        j = np.minimum(y.astype(np.int64), n_q - 2)
-        fx, fy = x - i, y - j
-
-        def at(m):
-            return (m[i, j] * (1 - fx) + m[i + 1, j] * fx) * (1 - fy) + (
-                m[i, j + 1] * (1 - fx) + m[i + 1, j + 1] * fx
-            ) * fy
-
-        return tuple(at(m) if m is not None else None for m in self.grid)
-
-
-# the pair table's reach and resolution: separations up to half the 10-90 % rise time (merged
-# sub-ray echoes are at most a quarter apart), 65 x 65 nodes (interpolation error ~7 um in range,
-# 1e-5 in peak: measured against the sampled features)
-PAIR_REACH = 0.5
-PAIR_NODES = 65
-
-
-def _pair_table(
-    shape: PulseShape, dt_s: float, cfd_delay_s: float, cfd_fraction: float, raw: bool
-) -> PairTable:
-    """The pulse's two-element features, computed like any echo's once and kept."""
-    key = (shape.tau_s, shape.a, shape.sigma_h_s, dt_s, cfd_delay_s, cfd_fraction, raw)
-    if key not in _PAIRS:
-        if len(_PAIRS) > 64:
-            _PAIRS.clear()
-        reach = PAIR_REACH * shape.rise_time_10_90_s
-        d, q = np.meshgrid(
-            np.linspace(0.0, reach, PAIR_NODES), np.linspace(0.0, 1.0, PAIR_NODES), indexing="ij"
-        )
-        arrivals = np.stack([np.zeros(d.size), d.ravel()], axis=1)
-        weights = np.stack([q.ravel(), 1.0 - q.ravel()], axis=1)
-        jobs = _jobs(shape, arrivals, weights, np.arange(d.size), dt_s, cfd_delay_s, 1 << 22)
-        grid = [np.zeros(d.size) for _ in range(7)]
-        for pixels, args in jobs:
-            for g, v in zip(grid, _features_chunk(shape, *args, cfd_fraction, raw), strict=True):
-                if v is not None:
-                    g[pixels] = v
-        grid = [g.reshape(d.shape) for g in grid]
-        _PAIRS[key] = PairTable(reach, (*grid[:3], grid[3] if raw else None, *grid[4:]))
-    return _PAIRS[key]
-
-
-def _single_element(
-    shape: PulseShape, dt_s: float, cfd_delay_s: float, cfd_fraction: float, raw: bool
-) -> tuple:
-    """Features (peak, t_half, slope, raw peak, 3 CFD shot levels) of the reference pulse
-    arriving at t = 0 with unit weight, computed like any echo's and kept: a one-element echo is
-    this pulse shifted and scaled (its half-maximum and CFD crossings move with the arrival; the
-    slope of the normalised CFD signal and its shot levels do not change)."""
-    key = (shape.tau_s, shape.a, shape.sigma_h_s, dt_s, cfd_delay_s, cfd_fraction, raw)
-    if key not in _SINGLE:
-        if len(_SINGLE) > 64:
-            _SINGLE.clear()
-        ((_, args),) = _jobs(
-            shape, np.zeros((1, 1)), np.ones((1, 1)), np.zeros(1), dt_s, cfd_delay_s, 1 << 20
-        )
-        out = _features_chunk(shape, *args, cfd_fraction, raw)
-        _SINGLE[key] = tuple(float(v[0]) if v is not None else None for v in out)
-    return _SINGLE[key]
-
-
-def _bucket_counts(count: np.ndarray) -> np.ndarray:
-    """Element counts rounded up to a power of two (pixels then share a few array shapes)."""
-    return 2 ** np.ceil(np.log2(np.maximum(count, 1))).astype(np.int64)
-
-
-# below this (pixels x samples x elements), a thread pool costs more than it saves: the many
-# small array passes then contend for the GIL (measured: 3200 pixels of ~3 elements ran in 13 ms
-# on one thread, 23 ms on two)
-_THREAD_MIN_ELEMENTS = 1 << 21

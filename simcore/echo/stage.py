@@ -16,7 +16,7 @@ from ..scene import Scene
 from ..stage import Stage, readonly
 from ..target import TargetModel, with_materials
 from .elements import element_weights, illumination_gain, merge_elements, split_elements
-from .features import EchoFeatures, echo_features
+from .features import EchoFeatures, echo_features, sample_echoes
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -64,10 +64,12 @@ def echo_waveform(shape: PulseShape, arrivals_s, weights, dt: float):
     has = weights > 0
     if not has.any():
         return np.zeros(0), np.zeros(0), np.zeros(0)
-    a, w = arrivals[has], weights[has]
+    a, w = arrivals[has][None, :], weights[has][None, :]
     t = np.arange(a.min() + shape.t_start_s, a.max() + shape.t_end_s, dt)
-    tau = t[:, None] - a[None, :]
-    return t, shape.raw_at(tau) @ w, shape.filtered_at(tau) @ w
+    raw, filt = (
+        sample_echoes(shape, p, a, w, t[:1], dt, len(t))[0] for p in (shape.raw, shape.filtered)
+    )
+    return t, raw, filt
 
 
 def stage_echo(scene: Scene, tgt: geometry.TargetStage, hits: geometry.Hits) -> EchoStage:

@@ -17,6 +17,7 @@ import numpy as np
 
 from ..constants import C
 from ..detection import Outliers
+from ..echo.features import compiled_kernel
 from ..pulse import PulseShape
 from ..receiver import ReceiverModel
 from .currents import BandLimit, band_limit, noisy_band_limited
@@ -101,7 +102,7 @@ def _signal_into(x: np.ndarray, setup: _GateSetup, lit: np.ndarray, local_rows: 
     """Write i_s = R_resp E sum_k w_k P0(t - t_k) (Eqs. 7, 29, 30) of the lit rows into the
     padded input x, on each pixel's own window (delays exact, never snapped)."""
     _pulses_into(
-        x, setup, lit, local_rows, setup.shape.raw_at, 0.0, setup.raw_end_s, setup.band.half_width
+        x, setup, lit, local_rows, setup.shape.raw, 0.0, setup.raw_end_s, setup.band.half_width
     )
 
 
@@ -114,12 +115,14 @@ def _filtered_signal_into(
     depends on the grid phase (1.3 mm rms in range at the default step)."""
     shape = setup.shape  # the table's whole span: the pulse is below 1e-10 of its peak outside
     t_end_s = shape.t0_s + shape.step_s * (len(shape.filtered) - 1)
-    _pulses_into(y, setup, lit, local_rows, shape.filtered_at, shape.t0_s, t_end_s, 0)
+    _pulses_into(y, setup, lit, local_rows, shape.filtered, shape.t0_s, t_end_s, 0)
 
 
-def _pulses_into(out, setup, lit, local_rows, pulse_at, t_begin_s, t_end_s, col_offset):
-    """out[row, c] += R_resp E sum_k w_k pulse_at(t_c - t_k), t_c = t_lo + (c - col_offset) dt,
-    over each lit row's window [first arrival + t_begin_s, last arrival + t_end_s]."""
+def _pulses_into(out, setup, lit, local_rows, table, t_begin_s, t_end_s, col_offset):
+    """out[row, c] += R_resp E sum_k w_k p(t_c - t_k), t_c = t_lo + (c - col_offset) dt, p the
+    pulse table ``table`` (``shape.raw`` or ``shape.filtered``), over each lit row's window
+    [first arrival + t_begin_s, last arrival + t_end_s]: by the compiled echo kernel where it is
+    available (serial: this runs on the gate's own threads), else in numpy batches."""
     any_weight = (setup.weights[lit] > 0).any(axis=1)
     lit, local_rows = lit[any_weight], local_rows[any_weight]
     if len(lit) == 0:
@@ -136,6 +139,13 @@ def _pulses_into(out, setup, lit, local_rows, pulse_at, t_begin_s, t_end_s, col_
     c0 = np.clip(c0, 0, width)
     t_end = t_last + t_end_s - setup.t_lo
     c1 = np.clip(np.ceil(t_end / dt).astype(np.int64) + m + 1, 0, width)
+    kernel = compiled_kernel()
+    if kernel is not None:
+        kernel.sample_echoes(
+            out, local_rows, c0, np.full(len(lit), setup.t_lo), c0 - m, c1 - m, dt, arr, w,
+            table, setup.shape.slope_of(table), setup.shape, scale, parallel=False,
+        )  # fmt: skip
+        return
     n_cols = c1 - c0
     k = arr.shape[1]
     for sel in batches(np.maximum(n_cols, 1) * k, 1 << 21):
@@ -144,7 +154,9 @@ def _pulses_into(out, setup, lit, local_rows, pulse_at, t_begin_s, t_end_s, col_
             continue
         cols = c0[sel, None] + np.arange(wmax)[None, :]
         t = setup.t_lo + (cols - m) * dt
-        p = np.einsum("pwk,pk->pw", pulse_at(t[:, :, None] - arr[sel, None, :]), w[sel])
+        p = np.einsum(
+            "pwk,pk->pw", setup.shape.lookup(table, t[:, :, None] - arr[sel, None, :]), w[sel]
+        )
         inside = cols < c1[sel, None]
         r = np.broadcast_to(local_rows[sel, None], cols.shape)
         out[r[inside], cols[inside]] += (scale * p[inside]).astype(out.dtype)

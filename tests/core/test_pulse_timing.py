@@ -128,35 +128,6 @@ def test_a_one_element_echo_has_the_features_of_the_same_echo_sampled_and_refine
     assert np.allclose(one.cfd_slope_per_s, three.cfd_slope_per_s, rtol=1e-6)
 
 
-def test_a_two_element_echo_from_the_table_has_the_features_of_the_same_echo_sampled():
-    """Two elements up to half a rise time apart, any share of the weight: the table's features
-    against the same echo with its first element cut in two halves (sampled and refined)."""
-    shape = echo.pulse_shape(TAU, echo.A_FWHM, B)
-    dt = echo.default_time_step_s(TAU, B)
-    reach = echo.PAIR_REACH * timing.rise_time_10_90_s(shape)
-    rng = np.random.default_rng(11)
-    n = 400
-    t1 = 3.3e-6 + rng.uniform(0, 1e-7, n)
-    d = rng.uniform(0, reach, n)
-    q = rng.uniform(0.01, 0.99, n)
-    w = rng.uniform(0.5, 2.0, n) * 1e-12
-    pair = echo.echo_features(
-        shape, np.stack([t1 + d, t1], 1), np.stack([w * (1 - q), w * q], 1), dt, 2.24e-9, 0.5
-    )
-    sampled = echo.echo_features(
-        shape,
-        np.stack([t1, t1, t1 + d], 1),
-        np.stack([w * q / 2, w * q / 2, w * (1 - q)], 1),
-        dt,
-        2.24e-9,
-        0.5,
-    )
-    assert np.max(np.abs(pair.t_half_s - sampled.t_half_s)) * sc.c / 2 < 2e-5  # 20 um
-    assert np.allclose(pair.peak_w_per_j, sampled.peak_w_per_j, rtol=1e-4)
-    # the sampled slope takes differences of the tabulated pulse: ~1e-3 of noise
-    assert np.allclose(pair.cfd_slope_per_s, sampled.cfd_slope_per_s, rtol=5e-3)
-
-
 def test_split_elements_adds_each_cells_spread_and_keeps_energy_and_mean():
     rng = np.random.default_rng(5)
     n, k = 50, 4

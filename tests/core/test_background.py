@@ -541,3 +541,32 @@ def test_by_day_the_mc_range_sigma_is_within_10_percent_of_eq25_per_sample():
         assert measured / expected == pytest.approx(
             1.0, abs=0.1 + 4 * MAD_REL_SD / math.sqrt(len(e))
         )
+
+
+def test_a_flyaround_from_two_tles_records_the_sun_angle_and_the_eclipse():
+    from simcore import flyaround
+
+    # the ISS and a companion 0.002 deg of mean anomaly behind it (about 240 m)
+    lines = TLE_ISS.splitlines()
+    behind = lines[1][:43] + f"{325.0268:8.4f}" + lines[1][51:68]
+    companion = _tle_with_checksum(lines[0][:68] + "\n" + behind)
+    scene = with_overrides(
+        simcore.Scene(),
+        {
+            "pixels": 8,
+            "orbit.target_tle": TLE_ISS,
+            "orbit.imaging_tle": companion,
+            "orbit.epoch_utc": "2024-03-19T12:00:00Z",
+            "sun.mode": "orbit",
+        },
+    )
+    fly = flyaround.run_flyaround(scene, [0.0, 1500.0, 3000.0], progress=False)
+    assert fly.tles is not None
+    for record, d in zip(fly.records, fly.pose.distance_m, strict=True):
+        assert 150.0 < d < 350.0
+        assert 0.0 <= record["sun_angle_deg"] <= 180.0
+        assert isinstance(record["eclipsed"], bool)
+    # the same times through the scene's orbit mode: the eclipse flags agree
+    geos = sun.orbit_sun_geometry(scene, fly.t_s)
+    assert [g.eclipsed for g in geos] == [r["eclipsed"] for r in fly.records]
+    assert fly.to_json()["orbits"]["target_tle"] == TLE_ISS

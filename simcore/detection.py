@@ -69,6 +69,19 @@ def draw_outliers(
     return Outliers(pixel=pixel.astype(np.int64), range_m=rng.uniform(lo, hi, size=n_out))
 
 
+def draw_outliers_per_pixel(
+    rng: np.random.Generator, n_false_per_pixel, gate_lo_m: float, gate_hi_m: float
+) -> Outliers:
+    """Section 4 step 5 with each pixel's own rate (background light): N_i ~ Poisson(n_false_i)
+    false alarms in pixel i, each at a range uniform over the gate [gate_lo_m, gate_hi_m].
+
+    n_false_per_pixel : (N,) expected false alarms of each pixel (flat index) per flash
+    """
+    counts = rng.poisson(np.asarray(n_false_per_pixel, dtype=np.float64))
+    pixel = np.repeat(np.arange(len(counts), dtype=np.int64), counts)
+    return Outliers(pixel=pixel, range_m=rng.uniform(gate_lo_m, gate_hi_m, size=len(pixel)))
+
+
 # ----------------------------------------------------------------------------------------------
 # limited stops (docs/physics.md#limited-stops): at most K stops per pixel and pulse
 # ----------------------------------------------------------------------------------------------
@@ -169,7 +182,8 @@ def draw_limited_stops(
     echo_pixel : (n,) int -- flat pixel index of each lit pixel
     echo_range_m : (n,) float -- range of its echo if the echo crosses the threshold (drawn
         with P_d), NaN if not [m]
-    rate_per_m : noise stops per metre of range (nu 2 / c) [1/m]
+    rate_per_m : noise stops per metre of range (nu 2 / c) [1/m]: one for all pixels, or
+        (n_pixels_total,) each pixel's own (background light)
     gate_lo_m, gate_hi_m : the gate [m]; holdoff_m : dead time after a stop, as range [m]
     Returns (n,) bool (the echo is a stop) and the false-alarm stops as Outliers.
     """
@@ -187,11 +201,16 @@ def draw_limited_stops(
         t0 = start[active]
         lost = echo_at[active] < t0  # the echo fell into the last dead time
         echo_at[active[lost]] = np.inf
-        noise = (
-            t0 + rng.exponential(1.0 / rate_per_m, size=len(active))
-            if rate_per_m > 0
-            else (np.full(len(active), np.inf))
-        )
+        if isinstance(rate_per_m, np.ndarray):  # each pixel its own rate
+            rate = rate_per_m[active]
+            with np.errstate(divide="ignore"):
+                noise = t0 + rng.exponential(1.0, size=len(active)) / rate
+        else:
+            noise = (
+                t0 + rng.exponential(1.0 / rate_per_m, size=len(active))
+                if rate_per_m > 0
+                else (np.full(len(active), np.inf))
+            )
         is_echo = echo_at[active] <= noise
         stop = np.where(is_echo, echo_at[active], noise)
         inside = stop <= gate_hi_m

@@ -10,6 +10,13 @@ writes ``frames/frame_000_t00000s.ply`` ... (one point cloud per frame, sensor f
 the per-frame records. The ``lmapd flyaround`` command (``simcore.cli.flyaround``) adds the JSON
 record and the plot of the paper's Figure 7.
 
+The orbits are Table 3's (``target``, ``imaging``) or, when the scene gives them
+(``orbit.target_tle``, ``orbit.imaging_tle``), two TLEs propagated by SGP4, so real satellite
+pairs can be imaged. Each frame's time since ``orbit.epoch_utc`` goes into its scene
+(``orbit.time_s``): with ``sun.mode = "orbit"`` the Sun and the Earth's shadow follow the orbit
+(``simcore.sun``), and every record carries the Sun's angle from the line of sight and whether
+the target is in eclipse.
+
 Every frame uses the scene's seed, so frame i is reproduced exactly by ``lmapd simulate`` with the
 same scene and ``--set pose.quaternion_wxyz=[...] --set distance_m=...`` taken from its record.
 The scene's own pose keys are ignored. The range gate follows the distance when
@@ -64,8 +71,10 @@ class FlyaroundResult:
         One per frame, in time order: ``t_s`` [s], ``distance_m`` [m], ``quaternion_wxyz`` (4,),
         ``angles_deg`` (3,) [deg], ``n_points``, ``n_outliers``, ``n_dropped``, ``n_unlit``,
         ``n_hit_pixels``, ``snr_median``, ``range_sigma_m_median`` [m] (None without
-        detections), ``frame_s`` [s] (wall time of the frame, its PLY included) and ``ply``
-        (file name, or None).
+        detections), ``sun_angle_deg`` (at the target, between the Sun and the lidar) [deg],
+        ``eclipsed`` (the target in the Earth's shadow), ``background_power_w_median`` [W],
+        ``n_sunlit_pixels``, ``frame_s`` [s] (wall time of the frame, its PLY included) and
+        ``ply`` (file name, or None).
     target_name, target_credit : str
         The target model's display name and the credit line its use requires.
     wall_s : float
@@ -81,6 +90,11 @@ class FlyaroundResult:
     target_name: str
     target_credit: str
     wall_s: float
+    tles: tuple[str, str] | None = None
+
+    def pose_series(self, t_s) -> RelativePose:
+        """The relative pose at the times ``t_s`` [s] from the same orbits (TLEs or elements)."""
+        return _pose_series(self.scene, self.target, self.imaging, t_s, self.j2)
 
     @property
     def t_s(self) -> np.ndarray:
@@ -108,18 +122,29 @@ class FlyaroundResult:
         figures over the imaged frames only.
         """
         d = self.pose.distance_m
+        if self.tles is None:
+            orbits = {
+                "target": dataclasses.asdict(self.target),
+                "imaging": dataclasses.asdict(self.imaging),
+            }
+            stats = orbit.distance_stats(self.target, self.imaging, j2=self.j2)
+        else:
+            orbits = {"target_tle": self.tles[0], "imaging_tle": self.tles[1]}
+            dense = self.pose_series(np.linspace(0.0, self.target.period_s, 2000, endpoint=False))
+            stats = {
+                "min_m": float(dense.distance_m.min()),
+                "mean_m": float(dense.distance_m.mean()),
+                "max_m": float(dense.distance_m.max()),
+            }
         return {
             "scene": self.scene.to_dict(),
             "j2": self.j2,
             "interval_s": self.interval_s,
             "n_frames": len(self.records),
-            "orbits": {
-                "target": dataclasses.asdict(self.target),
-                "imaging": dataclasses.asdict(self.imaging),
-            },
+            "orbits": orbits,
             "target": {"name": self.target_name, "credit": self.target_credit},
             "material_names": list(MATERIAL_NAMES),
-            "distance_stats": orbit.distance_stats(self.target, self.imaging, j2=self.j2),
+            "distance_stats": stats,
             "frame_distance_m": {
                 "min_m": float(d.min()),
                 "mean_m": float(d.mean()),
@@ -180,7 +205,14 @@ def run_flyaround(
         From the pipeline, e.g. a mesh that cannot be loaded.
     """
     start = time.perf_counter()
-    pose = orbit.relative_pose_series(target, imaging, times_s, j2=j2)
+    tles = None
+    if scene.orbit.target_tle:  # real satellites: SGP4 states; their osculating elements
+        tles = (scene.orbit.target_tle, scene.orbit.imaging_tle)
+        target, imaging = (_osculating(scene, which) for which in ("target", "imaging"))
+    pose = _pose_series(scene, target, imaging, times_s, j2)
+    from . import sun  # noqa: PLC0415  (the ephemeris: the Sun at each frame)
+
+    suns = sun.orbit_sun_geometry(scene, pose.t_s, j2=j2)
     folder = None if out_dir is None else Path(out_dir)
     if folder is not None:
         folder.mkdir(parents=True, exist_ok=True)
@@ -191,7 +223,7 @@ def run_flyaround(
     )
     with bar:
         for i in range(len(pose.t_s)):
-            record, result = _image_frame(scene, pose, i, pipeline, folder)
+            record, result = _image_frame(scene, pose, i, pipeline, folder, suns[i], j2)
             records.append(record)
             bar.set_postfix_str(f"{record['distance_m']:.0f} m, {record['n_points']} points")
             bar.update()
@@ -205,11 +237,39 @@ def run_flyaround(
         target_name=result.target.name,
         target_credit=result.target.credit,
         wall_s=time.perf_counter() - start,
+        tles=tles,
     )
 
 
+def _osculating(scene: Scene, which: str) -> Elements:
+    """The osculating elements at the epoch of a satellite given by its TLE (for the record's
+    period and the plot's labels; the frames use SGP4 itself)."""
+    from .sun import satellite_states  # noqa: PLC0415
+
+    r, v = satellite_states(scene, which, [0.0])
+    return orbit.state_to_elements(r[0], v[0])
+
+
+def _pose_series(scene: Scene, target: Elements, imaging: Elements, t_s, j2: bool):
+    """The relative pose at ``t_s`` [s]: SGP4 states of the scene's TLEs, else the elements."""
+    if not scene.orbit.target_tle:
+        return orbit.relative_pose_series(target, imaging, t_s, j2=j2)
+    from .sun import satellite_states  # noqa: PLC0415
+
+    t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
+    r_t, v_t = satellite_states(scene, "target", t)
+    r_i, v_i = satellite_states(scene, "imaging", t)
+    return orbit.relative_pose_from_states(t, r_t, v_t, r_i, v_i)
+
+
 def _image_frame(
-    scene: Scene, pose: RelativePose, i: int, pipeline: Pipeline, folder: Path | None
+    scene: Scene,
+    pose: RelativePose,
+    i: int,
+    pipeline: Pipeline,
+    folder: Path | None,
+    sun_geo,
+    j2: bool,
 ) -> tuple[dict[str, Any], Result]:
     """Image frame ``i`` of ``pose``; write its PLY into ``folder`` if given; its record."""
     frame_start = time.perf_counter()
@@ -219,6 +279,8 @@ def _image_frame(
         {
             "pose.quaternion_wxyz": pose.quaternion_wxyz[i].tolist(),
             "distance_m": float(pose.distance_m[i]),
+            "orbit.time_s": t_s,
+            "orbit.j2": bool(j2),
         },
     )
     result = pipeline.run(frame_scene)
@@ -233,6 +295,8 @@ def _image_frame(
         "quaternion_wxyz": pose.quaternion_wxyz[i].tolist(),
         "angles_deg": pose.angles_deg[i].tolist(),
         **{key: summary[key] for key in _SUMMARY_KEYS},
+        "sun_angle_deg": _sun_angle_deg(sun_geo.direction_body, pose.relative_position_lvlh_m[i]),
+        "eclipsed": bool(sun_geo.eclipsed),
         "frame_s": time.perf_counter() - frame_start,
         "ply": ply_name,
     }
@@ -247,7 +311,16 @@ _SUMMARY_KEYS = (
     "n_hit_pixels",
     "snr_median",
     "range_sigma_m_median",
+    "background_power_w_median",
+    "n_sunlit_pixels",
 )
+
+
+def _sun_angle_deg(sun_body, lidar_body_m) -> float:
+    """Angle at the target between the Sun and the lidar [deg] (0: the Sun behind the lidar)."""
+    u = np.asarray(lidar_body_m, dtype=np.float64)
+    c = float(np.dot(sun_body, u) / np.linalg.norm(u))
+    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
 
 
 def _ply_comments(scene: Scene, result, index: int, pose: RelativePose) -> tuple[str, ...]:

@@ -251,6 +251,26 @@ class RayCaster:
         range_m[hit] = start_m + tfar[hit]
         return range_m, face
 
+    def occluded(self, origins_t, direction_t) -> np.ndarray:
+        """(n,) bool: a ray from each of ``origins_t`` ((n, 3) float64, target frame [m]) along
+        the one unit ``direction_t`` ((3,) target frame) meets the mesh (shadow rays toward the
+        Sun; Embree's occlusion query, split over the worker threads like first hits)."""
+        n = len(origins_t)
+        if n == 0:
+            return np.zeros(0, dtype=bool)
+        starts = np.asarray(origins_t, dtype=np.float32)
+        dirs32 = np.broadcast_to(np.asarray(direction_t, dtype=np.float32), (n, 3)).copy()
+        parts = parallel.threads() * (4 if n > 16384 else 1) if n > 4096 else 1
+        bounds = np.linspace(0, n, parts + 1).astype(int)
+        chunks = [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+
+        def run(part):
+            if part.stop == part.start:
+                return np.zeros(0, np.int32)
+            return np.asarray(self._scene.run(starts[part], dirs32[part], query="OCCLUDED"))
+
+        return np.concatenate(parallel.map_threads(run, chunks)) >= 0
+
     def facet_normals(self, face):
         """(n, 3) unit normals (target frame) of the given faces."""
         return np.take(self._normals, face, axis=0)  # (faster than fancy indexing rows)

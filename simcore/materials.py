@@ -81,6 +81,43 @@ def brdf(cos_theta, A, B, m, s):
     return np.where(front, spec + diffuse, 0.0)
 
 
+def brdf_bistatic(cos_i, cos_r, cos_h, A, B, m, s):
+    """Bistatic extension of Eq. 6: light arriving at incidence angle theta_i, leaving towards
+    the observer at theta_r, theta_h the angle between the normal and the half vector of the two
+    directions   [1/sr]:
+
+        f = A exp(-tan^2 theta_h / s^2) / (cos^4 theta_h cos theta_i cos theta_r)
+            + B (cos theta_i cos theta_r)^(m / 2)
+
+    The specular term is the Torrance-Sparrow / Cook-Torrance microfacet form with the Beckmann
+    facet distribution D(theta_h) ~ exp(-tan^2 theta_h / s^2) / cos^4 theta_h over
+    cos theta_i cos theta_r (Cook & Torrance 1982, ACM Trans. Graph. 1(1) 7-24; Beckmann &
+    Spizzichino 1963), its Fresnel, shadowing and normalisation constants in A, as Eq. 6 has
+    them; the diffuse term is Minnaert's reciprocal form (Minnaert 1941, ApJ 93, 403). Both
+    obey reciprocity (i <-> r) and with the source behind the observer (theta_i = theta_r =
+    theta_h = theta) give Eq. 6: A exp(-tan^2 / s^2) / cos^6 + B cos^m. Evaluated in log space
+    like :func:`brdf`; 0 where either cosine is <= 0 (lit from behind or seen from behind).
+
+    cos_i, cos_r, cos_h : (...) float -- cosines of theta_i, theta_r, theta_h
+    A, B, m, s : (...) float, broadcastable -- the material's Eq. 6 parameters
+    """
+    ci = np.asarray(cos_i, dtype=np.float64)
+    cr = np.asarray(cos_r, dtype=np.float64)
+    ch = np.asarray(cos_h, dtype=np.float64)
+    A, B, m, s = (np.asarray(x, dtype=np.float64) for x in (A, B, m, s))
+    front = (ci > 0) & (cr > 0) & (ch > 0)
+    ci = np.where(front, np.minimum(ci, 1.0), 1.0)
+    cr = np.where(front, np.minimum(cr, 1.0), 1.0)
+    ch = np.where(front, np.minimum(ch, 1.0), 1.0)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        tan2 = (1.0 - ch * ch) / (ch * ch)
+        log_spec = np.log(np.where(A > 0, A, 1.0)) - tan2 / np.where(s > 0, s, 1.0) ** 2
+        log_spec = log_spec - 4.0 * np.log(ch) - np.log(ci) - np.log(cr)
+    spec = np.where(A > 0, np.exp(np.minimum(log_spec, 700.0)), 0.0)
+    diffuse = B * (ci * cr) ** (0.5 * m)
+    return np.where(front, spec + diffuse, 0.0)
+
+
 def material_brdf(cos_theta, material: Material):
     """Eq. 6 for one library material."""
     return brdf(cos_theta, material.A, material.B, material.m, material.s)

@@ -43,6 +43,7 @@ __all__ = [
     "j2_secular_rates_rad_s",
     "lvlh_attitude",
     "propagate",
+    "relative_pose_from_states",
     "relative_pose_series",
     "solve_kepler",
     "state_to_elements",
@@ -584,6 +585,14 @@ def relative_pose_series(
     t = _times(t_s, allow_empty=False)
     r_tgt, v_tgt = propagate(target, t, j2=j2)
     r_img, v_img = propagate(imaging, t, j2=j2)
+    return relative_pose_from_states(t, r_tgt, v_tgt, r_img, v_img)
+
+
+def relative_pose_from_states(t_s, r_tgt, v_tgt, r_img, v_img) -> RelativePose:
+    """The pose series of :func:`relative_pose_series` from the two satellites' states at the
+    times ``t_s`` (n,) [s]: positions (n, 3) [m] and velocities (n, 3) [m/s] in one inertial
+    frame (the ECI of the elements, or the GCRS of TLEs propagated by SGP4)."""
+    t = _times(t_s, allow_empty=False)
     body = lvlh_attitude(r_tgt, v_tgt)
     sensor = tracking_attitude(r_img, r_tgt, v_img)
     rotation = np.einsum("nji,njk->nik", sensor, body)

@@ -4,7 +4,8 @@ Each stage is declared next to its physics (a :class:`simcore.stage.Stage`: name
 stages, the scene values it reads, its function). A stage's cache key is its reads plus its
 upstream stages' keys, so a TNR change re-runs only detection and the cloud, a pulse-energy change
 only the receiver onwards (echoes are per joule), and a pose change everything but the target and
-the rays. Cached arrays are read-only. One Pipeline per thread: it is not shared between threads.
+the rays, and a Sun change only the background onwards (never the ray cast). Cached arrays
+are read-only. One Pipeline per thread: it is not shared between threads.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from collections.abc import Callable
 from typing import Any
 
 from . import parallel
+from .background import BACKGROUND
 from .echo import ECHO
 from .echo.features import preload
 from .geometry import HITS, RAYS, TARGET
@@ -32,6 +34,7 @@ CHAIN: tuple[Stage, ...] = (
     RAYS,  # the array's sub-ray directions                        (geometry)
     HITS,  # first hits of every sub-ray, mixed pixels refined     (geometry)
     ECHO,  # per-pixel elements and echo features, per joule        (echo)
+    BACKGROUND,  # sunlight from the target and the Earth, per pixel (background)
     RECEIVER,  # the scene's receiver: peak power, SNR, noise       (receivers)
     DETECTION,  # detections, ranges, range sigma, false alarms     (receivers)
     CLOUD,  # points and per-point attributes                      (pointcloud)
@@ -70,6 +73,7 @@ class Pipeline:
             scene=scene,
             cloud=outputs["cloud"],
             echo=outputs["echo"],
+            background=outputs["background"],
             receiver=outputs["receiver"],
             detection=outputs["detection"],
             hits=outputs["hits"],

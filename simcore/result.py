@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from . import geometry
+from .background import Background
 from .echo import EchoStage
 from .pointcloud import PointCloud
 from .receivers import Detection, Response
@@ -34,6 +35,7 @@ class Waveform:
     range_true_m: float
     p_detect: float
     detected: bool
+    background_w: float = 0.0  # the pixel's background power at the detector (DC, AC-coupled out)
 
 
 @dataclass(kw_only=True)
@@ -41,12 +43,14 @@ class Result:
     """One flash: the point cloud, per-pixel products and the stage timings.
 
     echo, receiver, detection : the outputs of those stages, per lit pixel (aligned with
-    ``echo.pixel``); hits, rays : the ray cast; timings_s : seconds per stage (0 = cached).
+    ``echo.pixel``); background : the background light per pixel; hits, rays : the ray cast;
+    timings_s : seconds per stage (0 = cached).
     """
 
     scene: Scene
     cloud: PointCloud
     echo: EchoStage
+    background: Background
     receiver: Response
     detection: Detection
     hits: geometry.Hits
@@ -94,9 +98,12 @@ class Result:
         if not (0 <= row < n and 0 <= col < n):
             raise IndexError(f"pixel ({row}, {col}) is outside the {n} x {n} array")
         e, d = self.echo, self.detection
+        per_pixel = getattr(d, "threshold_pixel_w", None)
+        threshold_w = d.threshold_w if per_pixel is None else float(per_pixel[row * n + col])
+        background_w = float(self.background.power_w[row, col])
         i = np.searchsorted(e.pixel, row * n + col)
         if i >= len(e.pixel) or e.pixel[i] != row * n + col:
-            return _no_echo(row, col, d.threshold_w)
+            return _no_echo(row, col, threshold_w, background_w)
         energy_j = self.scene.laser.pulse_energy_j
         t_s, raw, filt = e.waveform_per_j(i)
         peak_w = self.receiver.peak_power_w[i]
@@ -111,12 +118,28 @@ class Result:
             emitted_t_s=t_ref_s[keep],
             emitted_w=e.shape.filtered[keep] * (peak_w / e.shape.peak_w_per_j),
             t_half_s=float(e.features.t_half_s[i]),
-            threshold_w=d.threshold_w,
+            threshold_w=threshold_w,
             range_m=float(d.range_m[i]),
             range_true_m=float(d.range_true_m[i]),
             p_detect=float(d.p_detect[i]),
             detected=bool(d.detected[i]),
+            background_w=background_w,
         )
+
+    def _background_summary(self) -> dict[str, Any]:
+        """The background light's figures: median power over the lit pixels that see the
+        target (0 at night), the sunlit and Earth pixels, saturated pixels, the Sun angle."""
+        b = self.background
+        saturated = getattr(self.detection, "saturated", None)
+        return {
+            "background_power_w_median": _lit_median(b.power_w, self.echo.pixel),
+            "background_power_w_max": float(np.max(b.power_w)) if b.power_w.size else 0.0,
+            "n_sunlit_pixels": int(np.count_nonzero(b.sunlit)),
+            "n_earth_pixels": int(np.count_nonzero(b.earth)),
+            "n_saturated": int(np.count_nonzero(saturated)) if saturated is not None else 0,
+            "sun_angle_deg": None if np.isnan(b.sun_angle_deg) else float(b.sun_angle_deg),
+            "eclipsed": bool(b.eclipsed),
+        }
 
     def summary(self) -> dict[str, Any]:
         """The JSON summary of DESIGN.md section 3."""
@@ -141,14 +164,25 @@ class Result:
             "p_detect_mean": _stat(d.p_detect, np.mean),
             "snr_median": _stat(r.snr, np.median),
             "range_sigma_m_median": _stat(finite_sigma, np.median),
-            "n_false_expected": d.n_false_per_pixel * self.pixels**2,
+            "n_false_expected": (
+                d.n_false_expected
+                if isinstance(d.n_false_per_pixel, np.ndarray)
+                else d.n_false_per_pixel * self.pixels**2
+            ),
+            **self._background_summary(),
             "timings_s": dict(self.timings_s),
             "target": {"name": self.target.name, "credit": self.target.credit},
             "scene": self.scene.to_dict(),
         }
 
 
-def _no_echo(row: int, col: int, threshold_w: float) -> Waveform:
+def _lit_median(values: np.ndarray, pixel: np.ndarray) -> float:
+    """Median of a per-pixel image over the lit pixels ``pixel`` (flat), 0 if none."""
+    v = np.asarray(values).ravel()[pixel]
+    return float(np.median(v)) if len(v) else 0.0
+
+
+def _no_echo(row: int, col: int, threshold_w: float, background_w: float = 0.0) -> Waveform:
     empty = np.zeros(0)
     return Waveform(
         row=row,
@@ -164,6 +198,7 @@ def _no_echo(row: int, col: int, threshold_w: float) -> Waveform:
         range_true_m=np.nan,
         p_detect=0.0,
         detected=False,
+        background_w=background_w,
     )
 
 

@@ -11,6 +11,7 @@ leaves out (docs/physics.md#table-4).
 from __future__ import annotations
 
 import dataclasses
+import datetime
 import difflib
 import math
 import os
@@ -75,6 +76,17 @@ class ReceiveOptics:
     fov_rad: float = _f(
         0.03, "rad", 0.0, 1.0, "full field of view of the array (Eq. 22)", lo_open=True
     )
+    filter_width_m: float = _f(
+        1e-9,
+        "m",
+        0.0,
+        1e-6,
+        "band-pass filter full width, a flat top centred on the laser line (background light)",
+        lo_open=True,
+    )
+    filter_transmittance: float = _f(
+        0.9, "1", 0.0, 1.0, "band-pass filter transmittance in its band", lo_open=True
+    )
 
 
 @dataclass(frozen=True)
@@ -109,6 +121,15 @@ class Detector:
     dark_bulk_a: float = _f(1e-11, "A", 0.0, 1e-3, "bulk dark current I_db (primary)")
     snr_max: float = _f(
         math.inf, "1", 0.0, math.inf, "saturation: SNR ceiling (inf = none)", lo_open=True
+    )
+    linear_max_a: float = _f(
+        math.inf,
+        "A",
+        0.0,
+        math.inf,
+        "largest APD output current (echo peak + background) the chain answers linearly; a "
+        "pixel above it is flagged saturated and gives no point (inf = no limit)",
+        lo_open=True,
     )
 
 
@@ -152,6 +173,13 @@ class Timing:
     )
     rearm_holdoff_fwhm: float = _f(
         1.0, "1", 0.0, 100.0, "dead time after a stop, in FWHMs of the emitted pulse (0 = none)"
+    )
+    threshold_mode: str = _f(
+        "global",
+        "-",
+        doc="arming threshold TNR x the signal-free noise of a dark pixel, one for the array "
+        "(global), or of each pixel, its background included (per_pixel)",
+        choices=("global", "per_pixel"),
     )
 
 
@@ -230,6 +258,88 @@ class Fidelity:
         doc="statistical (Section 4: Eqs. 27-28 drawn) or montecarlo (Section 5: noisy "
         "waveforms through the discriminator)",
         choices=("statistical", "montecarlo"),
+    )
+
+
+# The span of the JPL DE421 ephemeris this simulator uses for the Sun (the `de421` package; its
+# documented span, "1900 through 2050"): the UTC dates orbit.epoch_utc (and epoch + time) may take.
+EPHEMERIS_FIRST_UTC = "1900-01-01T00:00:00+00:00"
+EPHEMERIS_LAST_UTC = "2050-12-31T00:00:00+00:00"
+EARTH_RADIUS_M = 6378137.0  # [m] WGS84 semi-major axis (= orbit.R_EARTH_M)
+TABLE3_ALTITUDE_M = 7073.22e3 - EARTH_RADIUS_M  # [m] Table 3's target: a - R_E, 695 km
+
+
+@dataclass(frozen=True)
+class Sun:
+    mode: str = _f(
+        "none",
+        "-",
+        doc="the Sun: none (the paper: no background light), manual (sun.azimuth_deg, "
+        "sun.elevation_deg) or orbit (from orbit.epoch_utc, orbit.time_s and the target's orbit)",
+        choices=("none", "manual", "orbit"),
+    )
+    azimuth_deg: float = _f(
+        0.0,
+        "deg",
+        -360.0,
+        360.0,
+        "manual: the Sun's azimuth in the target body frame, from +x towards +y",
+    )
+    elevation_deg: float = _f(
+        30.0,
+        "deg",
+        -90.0,
+        90.0,
+        "manual: the Sun's elevation above the target body's x-y plane, towards -z (away from "
+        "the Earth: the body's z axis points at the Earth's centre)",
+    )
+
+
+@dataclass(frozen=True)
+class Orbit:
+    epoch_utc: str = _f(
+        "2024-03-20T12:00:00Z",
+        "-",
+        doc="UTC epoch (ISO 8601) of the orbits' t = 0: the Sun from the JPL DE421 ephemeris "
+        "(sun.mode = orbit and fly-arounds); 1900 to 2050",
+    )
+    time_s: float = _f(
+        0.0,
+        "s",
+        0.0,
+        1e9,
+        "time since the epoch of this frame (sun.mode = orbit; a fly-around sets it per frame)",
+    )
+    j2: bool = _f(False, "-", doc="propagate the Table 3 orbits with the secular J2 rates")
+    target_tle: str = _f(
+        "",
+        "-",
+        doc="the target's two-line element set (two lines; propagated by SGP4); empty: the "
+        "Table 3 elements",
+    )
+    imaging_tle: str = _f(
+        "",
+        "-",
+        doc="the imaging satellite's two-line element set (fly-arounds; with orbit.target_tle)",
+    )
+
+
+@dataclass(frozen=True)
+class Background:
+    earth: bool = _f(
+        True, "-", doc="the sunlit Earth behind the target adds its light (a Lambertian disc)"
+    )
+    earth_albedo: float = _f(
+        0.3, "1", 0.0, 1.0, "the Earth's Lambertian albedo at the laser wavelength"
+    )
+    target_altitude_m: float = _f(
+        TABLE3_ALTITUDE_M,
+        "m",
+        0.0,
+        1e9,
+        "sun.mode = manual: the target's altitude above the (spherical) Earth, which lies along "
+        "its body z axis (orbit mode: from the orbit)",
+        lo_open=True,
     )
 
 
@@ -340,6 +450,9 @@ class Scene:
     pose: Pose = field(default_factory=Pose)
     fidelity: Fidelity = field(default_factory=Fidelity)
     receiver: ReceiverSelection = field(default_factory=ReceiverSelection)
+    sun: Sun = field(default_factory=Sun)
+    orbit: Orbit = field(default_factory=Orbit)
+    background: Background = field(default_factory=Background)
 
     def __post_init__(self):
         validate(self)
@@ -386,6 +499,9 @@ SECTIONS = {
     "pose": Pose,
     "fidelity": Fidelity,
     "receiver": ReceiverSelection,
+    "sun": Sun,
+    "orbit": Orbit,
+    "background": Background,
 }
 
 # The quick parameters shared by the CLI --set, the app state and the Python keyword API.
@@ -488,6 +604,95 @@ def _check_time_step(scene: Scene) -> None:
         )
 
 
+# The band the shipped solar spectrum covers (simcore/data/astm_e490_am0_900_1700nm.csv)
+SOLAR_TABLE_M = (900e-9, 1700e-9)
+
+
+def parse_utc(key: str, text: str) -> datetime.datetime:
+    """An ISO 8601 date and time as an aware UTC datetime (no zone given: UTC); SceneError
+    naming ``key`` if it does not parse."""
+    try:
+        when = datetime.datetime.fromisoformat(text.strip())
+    except (ValueError, AttributeError):
+        raise SceneError(
+            f"{key} = {text!r} is not an ISO 8601 date and time (e.g. 2024-03-20T12:00:00Z)"
+        ) from None
+    if when.tzinfo is None:
+        when = when.replace(tzinfo=datetime.UTC)
+    return when.astimezone(datetime.UTC)
+
+
+def _check_sun(scene: Scene) -> None:
+    """The orbit epoch inside the ephemeris's span, the TLEs parse, and with a Sun the laser
+    line inside the solar table."""
+    o = scene.orbit
+    epoch = parse_utc("orbit.epoch_utc", o.epoch_utc)
+    first = datetime.datetime.fromisoformat(EPHEMERIS_FIRST_UTC)
+    last = datetime.datetime.fromisoformat(EPHEMERIS_LAST_UTC)
+    span = f"the JPL DE421 ephemeris covers {first:%Y-%m-%d} to {last:%Y-%m-%d}"
+    if not first <= epoch <= last:
+        raise SceneError(f"orbit.epoch_utc = {o.epoch_utc!r} is outside the ephemeris: {span}")
+    if epoch + datetime.timedelta(seconds=o.time_s) > last:
+        raise SceneError(
+            f"orbit.time_s = {o.time_s:g} s after orbit.epoch_utc = {o.epoch_utc!r} is past the "
+            f"ephemeris: {span}"
+        )
+    if o.imaging_tle and not o.target_tle:
+        raise SceneError("orbit.imaging_tle is given without orbit.target_tle: give both or none")
+    for key in ("orbit.target_tle", "orbit.imaging_tle"):
+        text = getattr(o, key.split(".")[1])
+        if text:
+            check_tle(key, text, epoch + datetime.timedelta(seconds=o.time_s))
+    if scene.sun.mode == "none":
+        return
+    lam, width = scene.laser.wavelength_m, scene.receive.filter_width_m
+    lo, hi = SOLAR_TABLE_M
+    if not (lo <= lam - width / 2 and lam + width / 2 <= hi):
+        raise SceneError(
+            f"laser.wavelength_m = {lam:g} m with receive.filter_width_m = {width:g} m: the "
+            f"solar spectrum this simulator ships (ASTM E-490) covers {lo:g} to {hi:g} m; with "
+            "sun.mode other than none the filter band must lie inside it"
+        )
+
+
+def tle_lines(key: str, text: str) -> tuple[str, str]:
+    """The two lines of a two-line element set (a title line before them is dropped), each
+    checked for its line number, length and checksum (modulo 10); SceneError naming ``key``."""
+    lines = [line.rstrip() for line in text.strip().splitlines() if line.strip()]
+    if len(lines) == 3:
+        lines = lines[1:]
+    if len(lines) != 2:
+        raise SceneError(f"{key}: a TLE is two lines (1 ... and 2 ...), got {len(lines)}")
+    for number, line in zip("12", lines, strict=True):
+        if len(line) != 69 or line[0] != number or line[1] != " ":
+            raise SceneError(
+                f"{key}: line {number} must be 69 characters starting with '{number} ', got "
+                f"{line[:20]!r}... ({len(line)} characters)"
+            )
+        digits = sum(int(c) for c in line[:68] if c.isdigit()) + line[:68].count("-")
+        if not line[68].isdigit() or digits % 10 != int(line[68]):
+            raise SceneError(f"{key}: line {number} fails its checksum (column 69)")
+    return lines[0], lines[1]
+
+
+def check_tle(key: str, text: str, when: datetime.datetime) -> None:
+    """The TLE parses (SGP4) and its satellite is still in orbit at ``when`` (UTC)."""
+    line1, line2 = tle_lines(key, text)
+    from sgp4.api import Satrec, jday  # noqa: PLC0415  (only when a TLE is given)
+
+    sat = Satrec.twoline2rv(line1, line2)
+    if sat.error:
+        raise SceneError(f"{key}: SGP4 cannot read this TLE (error {sat.error})")
+    jd, fr = jday(when.year, when.month, when.day, when.hour, when.minute, when.second)
+    error, r_km, _ = sat.sgp4(jd, fr + when.microsecond / 86400e6)
+    if error:
+        what = "has decayed" if error == 6 else f"fails to propagate (SGP4 error {error})"
+        raise SceneError(
+            f"{key}: the satellite {what} at {when:%Y-%m-%dT%H:%M:%SZ} (orbit.epoch_utc + "
+            "orbit.time_s)"
+        )
+
+
 def validate(scene: Scene) -> None:
     """Check every value and the cross-field rules; raise SceneError naming the key."""
     _validate_fields(scene, "", names=("preset", "seed", "conventions", "paper_forms"))
@@ -519,6 +724,7 @@ def validate(scene: Scene) -> None:
             f"amplifiers.noise_factors has {len(a.noise_factors)} stages but "
             f"amplifiers.power_gains has {len(a.power_gains)}: give one of each per stage"
         )
+    _check_sun(scene)
     q = scene.pose.quaternion_wxyz
     if q and (len(q) != 4 or not all(math.isfinite(x) for x in q) or math.hypot(*q) < 1e-9):
         raise SceneError(

@@ -57,11 +57,11 @@ def plot_flyaround(result: FlyaroundResult, path: str | Path) -> None:
     import numpy as np  # noqa: PLC0415
     from matplotlib.figure import Figure  # noqa: PLC0415  (heavy import; only when plotting)
 
-    from .. import io, orbit  # noqa: PLC0415
+    from .. import io  # noqa: PLC0415
 
     t = result.t_s
     t_dense = np.linspace(t[0], t[-1], _PLOT_SAMPLES) if len(t) > 1 else t
-    dense = orbit.relative_pose_series(result.target, result.imaging, t_dense, j2=result.j2)
+    dense = result.pose_series(t_dense)
     # unwrap frames and dense curve together, so both land on the same branch
     both = np.concatenate([dense.angles_deg, result.pose.angles_deg])
     order = np.argsort(np.concatenate([t_dense, t]), kind="stable")
@@ -74,9 +74,10 @@ def plot_flyaround(result: FlyaroundResult, path: str | Path) -> None:
     interval = result.interval_s
     step = f"every {interval:g} s" if interval is not None else "at given times"
     orbits = "two-body + J2 secular" if result.j2 else "two-body"
+    source = "two TLEs, SGP4" if result.tles else f"Table 3 orbits, {orbits}"
     fig.suptitle(
         f"Fly-around of the {result.target_name or 'target'}: {len(t)} frames {step}\n"
-        f"(Table 3 orbits, {orbits}; scene {result.scene.name})",
+        f"({source}; scene {result.scene.name})",
         fontsize=11,
     )
 

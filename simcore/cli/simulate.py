@@ -68,4 +68,22 @@ def run_cli(args: argparse.Namespace) -> int:
         f"{summary['n_dropped']} of {summary['n_lit_pixels']} lit pixels dropped) "
         f"-> {out}  [{total_ms:.0f} ms]"
     )
+    if scene.sun.mode != "none":
+        say(background_line(summary))
     return 0
+
+
+def background_line(summary: dict) -> str:
+    """One line of the summary's background statistics (with a Sun)."""
+    if summary["eclipsed"] and not summary["n_earth_pixels"]:
+        return "background: the target is in the Earth's shadow, no sunlit Earth in view"
+    angle = summary["sun_angle_deg"]
+    return (
+        f"background: Sun {angle:.1f} deg from the line of sight"
+        f"{' (target eclipsed)' if summary['eclipsed'] else ''}, "
+        f"median {summary['background_power_w_median']:.3g} W over the lit target pixels, "
+        f"max {summary['background_power_w_max']:.3g} W; {summary['n_sunlit_pixels']} sunlit "
+        f"target pixels, {summary['n_earth_pixels']} Earth pixels, "
+        f"{summary['n_false_expected']:.3g} false alarms expected"
+        + (f", {summary['n_saturated']} saturated" if summary["n_saturated"] else "")
+    )

@@ -78,6 +78,7 @@ def noisy_band_limited(
     band: BandLimit,
     noise: bool,
     add_signal: bool = True,
+    row_scale: np.ndarray | None = None,
 ) -> np.ndarray:
     """Add the white current noise to the padded signal ``x`` IN PLACE, band-limit it.
 
@@ -86,6 +87,8 @@ def noisy_band_limited(
     Returns y : (n, L) band-limited current [A] ('valid' convolution: y[j] is at x's sample j + m).
     With ``add_signal=False`` y holds the band-limited noise only (its shot part still follows x):
     the caller adds the band-limited signal itself (the gate adds it in closed form).
+    ``row_scale`` (n,): each row's signal-free noise over sigma_n (a pixel's background light
+    adds its shot noise, 2 q i_bg0 M^2 F F_chain to S: docs/physics.md#background-noise); None: 1.
 
     The white sample variance ``S(t) / (2 dt)`` is drawn as a signal-free part for every sample
     plus an independent shot part where i_s > 0: the same normal law. The convolution is linear,
@@ -102,6 +105,8 @@ def noisy_band_limited(
     if noise:
         white = rng.standard_normal(x.shape, dtype=x.dtype)
         white *= x.dtype.type(receiver.sigma_n_a / math.sqrt(2.0 * dt * receiver.bandwidth_hz))
+        if row_scale is not None:
+            white *= np.asarray(row_scale, dtype=x.dtype)[:, None]
         if len(rows):
             idx = np.flatnonzero(x[rows] > 0)
             r, c = rows[idx // n_cols], idx % n_cols

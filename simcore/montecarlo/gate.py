@@ -96,6 +96,8 @@ class _GateSetup:
     weights: np.ndarray  # (n_lit, K), per joule
     window_lo: np.ndarray  # (n_lit,) detection window [s]
     window_hi: np.ndarray
+    noise_scale: np.ndarray | None = None  # (n_total,) sigma_n,pixel / sigma_n (background)
+    per_pixel_threshold: bool = False  # arm at TNR sigma_n,pixel instead of TNR sigma_n
 
 
 def _signal_into(x: np.ndarray, setup: _GateSetup, lit: np.ndarray, local_rows: np.ndarray):
@@ -171,8 +173,16 @@ def _gate_chunk(setup: _GateSetup, p0: int, p1: int, rng: np.random.Generator):
     lit = setup.lit_of_pixel[p0:p1]
     local = np.flatnonzero(lit >= 0)
     _signal_into(x, setup, lit[local], local)
-    y = noisy_band_limited(rng, x, setup.receiver, setup.band, setup.noise, add_signal=False)
+    scale = None if setup.noise_scale is None else setup.noise_scale[p0:p1]
+    y = noisy_band_limited(
+        rng, x, setup.receiver, setup.band, setup.noise, add_signal=False, row_scale=scale
+    )
     _filtered_signal_into(y, setup, lit[local], local)
+    if scale is not None and setup.per_pixel_threshold:
+        # arming at TNR sigma_n,pixel is arming the row over sigma_n,pixel / sigma_n at TNR
+        # sigma_n; the CFD's zero crossing does not change with the row's scale
+        y /= scale.astype(y.dtype)[:, None]
+        x /= scale.astype(x.dtype)[:, None]
     t1 = time.perf_counter()
     stops = discriminate(
         y,
@@ -244,6 +254,8 @@ def montecarlo_gate(
     arming: str = "continuous",
     max_bytes: int = _DEFAULT_MAX_BYTES,
     n_threads: int = _THREADS,
+    background_a=None,
+    per_pixel_threshold: bool = False,
 ) -> McResult:
     """Waveform Monte Carlo of one flash over the whole gate of every pixel
     (docs/physics.md#monte-carlo).
@@ -271,6 +283,11 @@ def montecarlo_gate(
     arming : "continuous" (an analog comparator) or "sampled" (crossings between samples only)
     max_bytes : int -- working set per worker thread [bytes]
     n_threads : int -- worker threads (numpy and scipy.fft release the GIL)
+    background_a : (n_pixels_total,) float, optional -- each pixel's background current at the
+        APD output, R_resp P_bg [A]: its shot noise joins the pixel's white noise
+        (docs/physics.md#background-noise); its DC level is removed (AC coupling)
+    per_pixel_threshold : bool -- arm each pixel at TNR x its own signal-free noise (with
+        ``background_a``); False: TNR x a dark pixel's sigma_n
 
     Returns
     -------
@@ -322,6 +339,8 @@ def montecarlo_gate(
         weights=weights,
         window_lo=window_lo,
         window_hi=window_hi,
+        noise_scale=_noise_scale(receiver, background_a, n_pixels_total),
+        per_pixel_threshold=bool(per_pixel_threshold),
     )
     rows = max(1, int(max_bytes) // (_BYTES_PER_SAMPLE * (n_samples + 2 * band.half_width)))
     bounds = [(p, min(p + rows, n_pixels_total)) for p in range(0, n_pixels_total, rows)]
@@ -374,6 +393,17 @@ def montecarlo_gate(
         n_unfired=sum(p["unfired"] for p in parts),
         timings_s=timings,
     )
+
+
+def _noise_scale(receiver: ReceiverModel, background_a, n_pixels_total: int):
+    """(n_total,) each pixel's signal-free noise over sigma_n, sqrt(1 + F_chain 2 q M F i_bg B
+    / sigma_n^2), or None without background."""
+    if background_a is None:
+        return None
+    i_bg = np.maximum(np.asarray(background_a, dtype=np.float64).reshape(-1), 0.0)
+    if i_bg.shape != (n_pixels_total,):
+        raise ValueError(f"background_a must be ({n_pixels_total},), got {i_bg.shape}")
+    return receiver.sigma_peak_a(i_bg) / receiver.sigma_n_a
 
 
 def montecarlo_detection(

@@ -4,7 +4,9 @@ A receiver is one module behind one interface, selected by the scene key ``recei
 
 - it reads the echo stage's hand-off, :class:`simcore.echo.EchoStage` (per lit pixel: the
   band-limited echo's peak per joule, half-maximum time and CFD slope, the strongest element's
-  material and facet, and the full waveform on demand: ``EchoStage.waveform_per_j(i)``);
+  material and facet, and the full waveform on demand: ``EchoStage.waveform_per_j(i)``), and
+  the background stage's :class:`simcore.background.Background` (per pixel of the array: the
+  optical background power at the detector, all zeros without a Sun);
 - :attr:`Receiver.respond` returns a :class:`Response` (per pixel: peak power at the input, the SNR
   the app shows, and the receiver's scalar noise figures), the *receiver* stage;
 - :attr:`Receiver.detect` returns a :class:`Detection` (per pixel: detection probability, the
@@ -31,6 +33,7 @@ from ..scene import DEFAULT_RECEIVER, RECEIVER_KINDS, Scene, receiver_kinds
 from ..stage import Stage, readonly
 
 if TYPE_CHECKING:
+    from ..background import Background
     from ..echo import EchoStage
 
 # kind -> the module that registers it when imported
@@ -64,8 +67,11 @@ class Detection:
     range_true_m : noise-free measured range (Eq. 31, carries the waveform's bias) [m]
     range_sigma_m : range noise standard deviation [m] (inf where undefined)
     range_m : measured range, NaN where not detected [m]
-    threshold_w : the arming threshold as power at the receiver input [W] (waveform plots)
-    n_false_per_pixel : expected false alarms per pixel per flash [1]
+    threshold_w : the arming threshold as power at the receiver input [W] (waveform plots; with
+        per-pixel thresholds, a dark pixel's)
+    n_false_per_pixel : expected false alarms per pixel per flash [1]: a float, the same for
+        every pixel, or (pixels**2,) per pixel (flat index) where the background makes pixels
+        differ
     outliers : the false-alarm points drawn for this flash
     """
 
@@ -75,8 +81,14 @@ class Detection:
     range_sigma_m: np.ndarray
     range_m: np.ndarray
     threshold_w: float
-    n_false_per_pixel: float
+    n_false_per_pixel: float | np.ndarray
     outliers: Outliers
+
+    @property
+    def n_false_expected(self) -> float:
+        """Expected false alarms of the whole array per flash (before the stops' limit) [1]."""
+        n = self.n_false_per_pixel
+        return float(np.sum(n)) if isinstance(n, np.ndarray) else n
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -87,14 +99,14 @@ class Receiver:
     doc : one line for the key reference
     response_reads, detection_reads : scene -> hashable tuple of every scene value the step reads
         (besides the echo stage's key and ``receiver.kind``)
-    respond : (scene, echo) -> Response
+    respond : (scene, echo, background) -> Response
     detect : (scene, echo, response) -> Detection
     """
 
     kind: str
     doc: str
     response_reads: Callable[[Scene], tuple]
-    respond: Callable[[Scene, EchoStage], Response]
+    respond: Callable[[Scene, EchoStage, Background], Response]
     detection_reads: Callable[[Scene], tuple]
     detect: Callable[[Scene, EchoStage, Response], Detection]
 
@@ -143,8 +155,8 @@ def _detection_reads(scene: Scene) -> tuple:
     return (scene.receiver.kind, get(scene.receiver.kind).detection_reads(scene))
 
 
-def stage_receiver(scene: Scene, echo: EchoStage) -> Response:
-    return _readonly_arrays(get(scene.receiver.kind).respond(scene, echo))
+def stage_receiver(scene: Scene, echo: EchoStage, background: Background) -> Response:
+    return _readonly_arrays(get(scene.receiver.kind).respond(scene, echo, background))
 
 
 def stage_detection(scene: Scene, echo: EchoStage, response: Response) -> Detection:
@@ -157,7 +169,12 @@ def _readonly_arrays(record):
     return record
 
 
-RECEIVER = Stage(name="receiver", upstream=("echo",), reads=_response_reads, compute=stage_receiver)
+RECEIVER = Stage(
+    name="receiver",
+    upstream=("echo", "background"),
+    reads=_response_reads,
+    compute=stage_receiver,
+)
 DETECTION = Stage(
     name="detection",
     upstream=("echo", "receiver"),

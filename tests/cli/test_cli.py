@@ -48,6 +48,7 @@ def test_simulate_writes_the_cloud_the_summary_and_the_waveforms(tmp_path, capsy
         "rays",
         "hits",
         "echo",
+        "background",
         "receiver",
         "detection",
         "cloud",

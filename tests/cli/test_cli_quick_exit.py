@@ -36,4 +36,4 @@ def test_a_user_error_still_exits_2_with_its_message(tmp_path):
 def test_keys_prints_every_key():
     done = lmapd("keys")
     assert done.returncode == 0
-    assert done.stdout.rstrip().splitlines()[-1].startswith("receiver.kind")
+    assert done.stdout.rstrip().splitlines()[-1].startswith("background.target_altitude_m")

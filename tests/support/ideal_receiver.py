@@ -11,8 +11,9 @@ from simcore.detection import Outliers
 KIND = "ideal"
 
 
-def respond(scene, echo) -> receivers.Response:
-    """The band-limited peak power; the 'SNR' is its margin over the fixed threshold."""
+def respond(scene, echo, background) -> receivers.Response:
+    """The band-limited peak power; the 'SNR' is its margin over the fixed threshold (an ideal
+    receiver ignores the background light)."""
     peak_w = echo.features.peak_w_per_j * scene.laser.pulse_energy_j
     return receivers.Response(
         peak_power_w=peak_w, snr=peak_w / THRESHOLD_W, noise_figures={"threshold_w": THRESHOLD_W}

@@ -40,9 +40,9 @@ def _decode(stream: bytes, max_points: int, max_faces: int) -> dict:
     except Exception as exc:  # DracoPy raises ValueError, FileTypeException, ...
         return {"error": f"{type(exc).__name__}: {str(exc)[:200]}"}
     faces = getattr(mesh, "faces", None)
-    if faces is None or len(faces) == 0:
+    points = getattr(mesh, "points", None)
+    if faces is None or points is None or len(faces) == 0:
         return {"error": "it holds no triangles (a point cloud or an empty mesh)"}
-    points = mesh.points
     if len(points) > max_points or len(faces) > max_faces:
         return {"error": f"{len(points):,} points, {len(faces):,} triangles: over the caps"}
     if points.ndim != 2 or points.shape[1] != 3 or faces.ndim != 2 or faces.shape[1] != 3:

@@ -157,7 +157,12 @@ class Timing:
 
 @dataclass(frozen=True)
 class Target:
-    mesh: str = _f("mro", "-", doc="built-in target name or a path to a glTF/OBJ/STL/PLY mesh")
+    mesh: str = _f(
+        "mro",
+        "-",
+        doc="built-in target (`lmapd targets`: NASA spacecraft, plate, sphere, cube, cylinder) "
+        "or a path to a glTF (Draco too)/OBJ/STL/PLY mesh",
+    )
     scale_m_per_unit: float = _f(
         0.0, "m", 0.0, 1e6, "metres per mesh unit; 0 = the target's own default (MRO: 15/89.74)"
     )

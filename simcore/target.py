@@ -404,7 +404,8 @@ def mesh_geometry(path: Path) -> MeshGeometry:
     geometry = _read_cached(file)
     if geometry is None:
         geometry = _read_geometry(path)
-        _write_cached(file, geometry)
+        if len(geometry.faces):  # a mesh with no triangles is refused: nothing to keep
+            _write_cached(file, geometry)
     return geometry
 
 

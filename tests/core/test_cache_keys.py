@@ -72,6 +72,8 @@ ALTERNATIVES = {
     "timing.rearm_holdoff_fwhm": (40.0, {"timing.max_stops": 3}),
     "target.mesh": ("other", {}),  # a single plate
     "target.scale_m_per_unit": (1.2, {}),
+    "target.size_m": (3.0, {"target.scale_m_per_unit": 0.0}),
+    "target.alpha_threshold": (0.0, {"target.mesh": "veiled"}),  # a translucent plate behind
     "target.material_map": ("map", {"target.materials": {}}),  # a map file
     "target.materials": ({"*": "coating_1"}, {}),
     "pose.pitch_deg": (10.0, {}),
@@ -124,7 +126,30 @@ def files(tmp_path_factory):
     other = write_plates(folder / "other.obj", [(3.0, 0.0, -20.0)])
     material_map = folder / "map.toml"
     material_map.write_text('default = "solar_panel"\n')
-    return {"plate": plate, "other": other, "map": str(material_map)}
+    return {
+        "plate": plate,
+        "other": other,
+        "map": str(material_map),
+        "veiled": write_veiled(folder / "veiled.glb"),
+    }
+
+
+def write_veiled(path) -> str:
+    """The two plates (opaque) and, 0.3 m behind them, a 6 m plate of glTF alpha 0.3 (BLEND)."""
+    scene = trimesh.Scene()
+    for name, plates, rgba, mode in (
+        ("plates", [(4.0, 0.0, 25.0), (1.5, -0.4, -10.0)], [200, 200, 200, 255], None),
+        ("veil", [(6.0, 0.3, 0.0)], [200, 200, 255, 77], "BLEND"),
+    ):
+        mesh = trimesh.load(write_plates(path.with_suffix(f".{name}.obj"), plates), force="mesh")
+        mesh.visual = trimesh.visual.TextureVisuals(
+            material=trimesh.visual.material.PBRMaterial(
+                name=name, baseColorFactor=rgba, alphaMode=mode
+            )
+        )
+        scene.add_geometry(mesh, geom_name=name)
+    path.write_bytes(scene.export(file_type="glb"))
+    return str(path)
 
 
 @pytest.fixture(scope="module")
@@ -175,6 +200,7 @@ def differs(a: dict, b: dict) -> bool:
 def test_a_warm_run_after_changing_one_key_equals_a_fresh_run(key, alternative, files, ideal):
     value, extra = alternative if key != "paper_forms" else (alternative, {})
     value = files.get(value, value) if isinstance(value, str) else value
+    extra = {k: files.get(v, v) if isinstance(v, str) else v for k, v in extra.items()}
     base = simcore.with_overrides(simcore.Scene(), {**BASE, "target.mesh": files["plate"], **extra})
     changed = simcore.with_overrides(base, {key: value})
     assert changed != base

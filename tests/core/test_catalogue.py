@@ -178,3 +178,12 @@ def test_bad_meshes_give_one_clear_message_and_nothing_cached(tmp_path, vertices
     with pytest.raises(TargetError, match=message):
         load_target(Target(mesh=str(path)))
     assert set((cache_dir() / "targets").glob("*.npz")) == before
+
+
+def test_a_sweep_takes_targets_by_name(tmp_path):
+    from simcore.sweep import build_sweep, run_sweep
+
+    sweep = build_sweep(fixed={"pixels": 32}, grid={"target.mesh": ["tdrs", "tess", "plate"]})
+    report = run_sweep(sweep, tmp_path / "sweep", workers=0, progress=False)
+    assert report.n_failed == 0
+    assert report.table["target.mesh"].to_pylist() == ["tdrs", "tess", "plate"]

@@ -493,7 +493,7 @@ def load_mesh_file(
         try:
             check_gltf_file(data, kind == "glb", folder)
         except GltfError as exc:
-            raise TargetError(str(exc)) from None
+            raise TargetError(f"cannot read the .{kind} file ({exc})") from None
     loaded = trimesh.load(file_obj, file_type=file_type, force=None, process=False, **load_options)
     geometries = loaded.geometry.values() if isinstance(loaded, trimesh.Scene) else [loaded]
     meshes = [g for g in geometries if isinstance(g, trimesh.Trimesh)]

@@ -694,6 +694,8 @@ TARGET = Stage(
     reads=lambda s: (
         s.target.mesh,
         s.target.scale_m_per_unit,
+        s.target.size_m,
+        s.target.alpha_threshold,
         s.target.material_map,
         source_stamp(s.target),  # a file overwritten in place is read again
     ),

@@ -14,7 +14,7 @@ from .echo import EchoStage
 from .pointcloud import PointCloud
 from .receivers import Detection, Response
 from .scene import Scene
-from .target import TargetModel
+from .target import TargetModel, parts_table
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -171,7 +171,14 @@ class Result:
             ),
             **self._background_summary(),
             "timings_s": dict(self.timings_s),
-            "target": {"name": self.target.name, "credit": self.target.credit},
+            "target": {
+                "name": self.target.name,
+                "credit": self.target.credit,
+                "parts": [
+                    {k: row[k] for k in ("name", "material", "area_share", "transparent")}
+                    for row in parts_table(self.target)
+                ],
+            },
             "scene": self.scene.to_dict(),
         }
 

@@ -185,13 +185,34 @@ class Timing:
 
 @dataclass(frozen=True)
 class Target:
-    mesh: str = _f("mro", "-", doc="built-in target name or a path to a glTF/OBJ/STL/PLY mesh")
+    mesh: str = _f(
+        "mro",
+        "-",
+        doc="built-in target (`lmapd targets`: NASA spacecraft, plate, sphere, cube, cylinder) "
+        "or a path to a glTF (Draco too)/OBJ/STL/PLY mesh",
+    )
     scale_m_per_unit: float = _f(
         0.0, "m", 0.0, 1e6, "metres per mesh unit; 0 = the target's own default (MRO: 15/89.74)"
+    )
+    size_m: float = _f(
+        0.0,
+        "m",
+        0.0,
+        1e4,
+        "the target's real size, its longest bounding-box side (instead of scale_m_per_unit); "
+        "0 = the target's own size (a mesh file: 1 m per unit)",
     )
     material_map: str = _f("", "-", doc="material map TOML; empty = the target's own")
     materials: tuple[tuple[str, str], ...] = _f(
         (), "-", doc="per-part material overrides: [target.materials] part = material"
+    )
+    alpha_threshold: float = _f(
+        0.5,
+        "1",
+        0.0,
+        1.0,
+        "parts whose glTF opacity (base colour alpha, alphaMode BLEND or MASK) is below this "
+        "are transparent to the lidar; 0 = every part is seen",
     )
 
 
@@ -703,6 +724,12 @@ def validate(scene: Scene) -> None:
         raise SceneError(
             f"detector.bias_voltage_v = {d.bias_voltage_v:g} V must be below "
             f"detector.breakdown_voltage_v = {d.breakdown_voltage_v:g} V (Miller's law, Eq. 9)"
+        )
+    t = scene.target
+    if t.size_m > 0 and t.scale_m_per_unit > 0:
+        raise SceneError(
+            f"target.size_m = {t.size_m:g} m and target.scale_m_per_unit = "
+            f"{t.scale_m_per_unit:g} m are both set: give the size or the scale, not both"
         )
     fid = scene.fidelity
     kr = math.isqrt(fid.refine_subrays)

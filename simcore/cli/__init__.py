@@ -3,6 +3,8 @@
     lmapd simulate [SCENE.toml] [--set NAME=VALUE ...] --out cloud.ply
                    [--summary summary.json] [--waveforms waveforms.npz]
     lmapd keys [--markdown]
+    lmapd targets
+    lmapd target-info MESH_OR_NAME [--set target.KEY=VALUE ...] [--json]
     lmapd bench [--quick] [--json FILE] [--tradeoff --out DIR [--pixels N]]
     lmapd app [--host 127.0.0.1] [--port 8080] [--scene SCENE]
     lmapd flyaround [SCENE.toml] [--set NAME=VALUE ...] --out DIR [--interval-s 300]
@@ -22,12 +24,13 @@ import argparse
 import os
 import sys
 
-from . import app, bench, flyaround, keys, reproduce, simulate, sweep
+from . import app, bench, flyaround, keys, reproduce, simulate, sweep, target_info, targets
 from .common import EXIT_USAGE, CliError, one_line, say
 
 __all__ = ["EXIT_USAGE", "CliError", "build_parser", "main", "run", "say"]
 
-SUBCOMMANDS = (simulate, keys, bench, app, flyaround, reproduce, sweep)  # in --help's order
+# in --help's order
+SUBCOMMANDS = (simulate, keys, targets, target_info, bench, app, flyaround, reproduce, sweep)
 # commands after which the process ends without the interpreter's teardown (unloading numpy,
 # scipy and the rest takes ~0.1 s once the work is done): they leave no thread that must finish,
 # no child process and no open file behind (their outputs are written and renamed into place)

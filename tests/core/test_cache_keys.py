@@ -79,6 +79,8 @@ ALTERNATIVES = {
     "timing.rearm_holdoff_fwhm": (40.0, {"timing.max_stops": 3}),
     "target.mesh": ("other", {}),  # a single plate
     "target.scale_m_per_unit": (1.2, {}),
+    "target.size_m": (3.0, {"target.scale_m_per_unit": 0.0}),
+    "target.alpha_threshold": (0.0, {"target.mesh": "veiled"}),  # a translucent plate behind
     "target.material_map": ("map", {"target.materials": {}}),  # a map file
     "target.materials": ({"*": "coating_1"}, {}),
     "pose.pitch_deg": (10.0, {}),
@@ -148,12 +150,36 @@ def files(tmp_path_factory):
     material_map = folder / "map.toml"
     material_map.write_text('default = "solar_panel"\n')
     tle = "\n".join(line + str(_checksum(line)) for line in TLE)
-    return {"plate": plate, "other": other, "map": str(material_map), "tle": tle}
+    return {
+        "plate": plate,
+        "other": other,
+        "map": str(material_map),
+        "tle": tle,
+        "veiled": write_veiled(folder / "veiled.glb"),
+    }
 
 
 def _checksum(line: str) -> int:
     """A TLE line's modulo-10 checksum (digits, and 1 for each minus sign)."""
     return (sum(int(c) for c in line if c.isdigit()) + line.count("-")) % 10
+
+
+def write_veiled(path) -> str:
+    """The two plates (opaque) and, 0.3 m behind them, a 6 m plate of glTF alpha 0.3 (BLEND)."""
+    scene = trimesh.Scene()
+    for name, plates, rgba, mode in (
+        ("plates", [(4.0, 0.0, 25.0), (1.5, -0.4, -10.0)], [200, 200, 200, 255], None),
+        ("veil", [(6.0, 0.3, 0.0)], [200, 200, 255, 77], "BLEND"),
+    ):
+        mesh = trimesh.load(write_plates(path.with_suffix(f".{name}.obj"), plates), force="mesh")
+        mesh.visual = trimesh.visual.TextureVisuals(
+            material=trimesh.visual.material.PBRMaterial(
+                name=name, baseColorFactor=rgba, alphaMode=mode
+            )
+        )
+        scene.add_geometry(mesh, geom_name=name)
+    path.write_bytes(scene.export(file_type="glb"))
+    return str(path)
 
 
 @pytest.fixture(scope="module")

@@ -99,7 +99,7 @@ class Engine:
             selection=selection,
             waveforms=waveforms.waveform_figure(result, selection),
             snr_histogram=stats.snr_histogram(result),
-            stats=stats.stats_rows(summary),
+            stats=stats.stats_rows({**summary, "noise_figures": result.receiver.noise_figures}),
             simulate_s=t1 - t0,
             views_s=time.perf_counter() - t1,
             timings_s=dict(result.timings_s),

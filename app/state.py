@@ -1,9 +1,10 @@
 """The app's UI state: one typed dataclass in display units, the control ranges, and the
 sanitiser that turns whatever arrives from the page (or the websocket) into valid controls.
 
-Display units differ from the scene's SI units in one place only: the pulse energy is shown in mJ
-(``pulse_energy_mj``); every other name matches the scene's quick parameters (``pitch_deg``,
-``azimuth_deg``, ``distance_m``, ``pixels``, ``tnr``, ``seed``).
+Display units differ from the scene's SI units in two places: the pulse energy is shown in mJ
+(``pulse_energy_mj``) and the filter width in nm (``filter_width_nm``); every other name matches
+the scene's quick parameters (``pitch_deg``, ``azimuth_deg``, ``distance_m``, ``pixels``, ``tnr``,
+``seed``) or its keys with the section's dot as an underscore (``sun_azimuth_deg``).
 """
 
 from __future__ import annotations
@@ -16,7 +17,8 @@ from typing import Any
 import simcore
 
 COLOR_BY = ("range", "snr", "outlier")
-IMAGE_KINDS = ("range", "peak_power")
+IMAGE_KINDS = ("range", "peak_power", "background")
+SUN_MODES = ("none", "manual", "orbit")  # sun.mode: the paper's dark sky, given, from the orbit
 SUBRAY_CHOICES = (1, 4, 16, 64)
 # fidelity presets of the core, plus "custom": the scene's fidelity with ``subrays`` sub-rays
 PRESET_CHOICES = (*simcore.PRESETS, "custom")
@@ -53,6 +55,9 @@ SPECS: dict[str, ControlSpec] = {
     "pulse_energy_mj": ControlSpec("Pulse energy", "mJ", 0.01, 50.0, 0.01, log_slider=True),
     "tnr": ControlSpec("TNR", "", 1.0, 10.0, 0.1),
     "seed": ControlSpec("Seed", "", 0, 2**31 - 1, 1, integer=True),
+    "sun_azimuth_deg": ControlSpec("Sun azimuth", "deg", -180.0, 180.0, 1.0),
+    "sun_elevation_deg": ControlSpec("Sun elevation", "deg", -90.0, 90.0, 1.0),
+    "filter_width_nm": ControlSpec("Filter width", "nm", 0.1, 100.0, 0.1, log_slider=True),
 }
 
 
@@ -73,6 +78,10 @@ class Controls:
     materials: dict[str, str] = field(default_factory=dict)  # part -> library material
     color_by: str = "range"
     image_kind: str = "range"
+    sun_mode: str = "none"
+    sun_azimuth_deg: float = 0.0
+    sun_elevation_deg: float = 30.0
+    filter_width_nm: float = 1.0
 
     def as_state(self) -> dict[str, Any]:
         """The trame state entries of these controls."""
@@ -104,6 +113,10 @@ def controls_from_scene(
         "subrays": scene.fidelity.subrays,
         "preset": preset_of(scene),
         "materials": dict(part_materials),
+        "sun_mode": scene.sun.mode,
+        "sun_azimuth_deg": scene.sun.azimuth_deg,
+        "sun_elevation_deg": scene.sun.elevation_deg,
+        "filter_width_nm": scene.receive.filter_width_m * 1e9,
     }
     return sanitize_controls(raw, Controls(materials=dict(part_materials)))
 
@@ -202,6 +215,7 @@ def sanitize_controls(raw: dict[str, Any], previous: Controls) -> tuple[Controls
         ("preset", "Fidelity preset", PRESET_CHOICES),
         ("color_by", "Colour points by", COLOR_BY),
         ("image_kind", "Array image", IMAGE_KINDS),
+        ("sun_mode", "Sun", SUN_MODES),
     )
     for key, label, options in choices:
         old = getattr(previous, key)

@@ -70,11 +70,15 @@ class FlyaroundPoses:
         return int(np.argmin(np.abs(self.times_s - float(t_s))))
 
     def overrides(self, t_s: float, j2: bool) -> dict[str, Any]:
-        """The ``simcore.with_overrides`` keys of the frame at ``t_s``: attitude and distance."""
+        """The ``simcore.with_overrides`` keys of the frame at ``t_s``: attitude, distance and
+        the orbit's time (the Sun and the Earth's shadow follow it with ``sun.mode = orbit``),
+        as ``lmapd flyaround`` sets them."""
         pose, i = self.pose(j2), self.index_of(t_s)
         return {
             "pose.quaternion_wxyz": [float(q) for q in pose.quaternion_wxyz[i]],
             "distance_m": float(pose.distance_m[i]),
+            "orbit.time_s": float(self.times_s[i]),
+            "orbit.j2": bool(j2),
         }
 
     def readout(self, t_s: float, j2: bool, fov_rad: float) -> dict[str, str]:

@@ -3,7 +3,8 @@ controls, a child of the app's logic.
 
 The query uses the names of ``lmapd simulate --set`` in SI units (``pitch_deg``, ``azimuth_deg``,
 ``distance_m``, ``pixels``, ``pulse_energy_j``, ``tnr``, ``seed``, ``preset`` or
-``fidelity.subrays``, ``target.materials.PART``), so a link and a command line read alike:
+``fidelity.subrays``, ``target.materials.PART``, ``sun.mode``, ``sun.azimuth_deg``,
+``sun.elevation_deg``, ``receive.filter_width_m``), so a link and a command line read alike:
 
     http://127.0.0.1:8080/?token=...&pitch_deg=30&pixels=128&tnr=4
 
@@ -24,9 +25,15 @@ from app.state import SPECS, Controls, echo, sanitize_controls
 
 MAX_LINK_SETTINGS = 64  # a longer query is refused whole
 MATERIAL_PREFIX = "target.materials."
-# the link's names of the numeric controls (their display names, but the energy in joules)
-LINK_NAMES = {key: key for key in SPECS} | {"pulse_energy_mj": "pulse_energy_j"}
-CONTROL_OF = {name: key for key, name in LINK_NAMES.items()}
+# the link's name of each numeric control, and the factor from its display unit to the SI one
+LINK_NAMES = {key: (key, 1.0) for key in SPECS} | {
+    "pulse_energy_mj": ("pulse_energy_j", 1e-3),
+    "sun_azimuth_deg": ("sun.azimuth_deg", 1.0),
+    "sun_elevation_deg": ("sun.elevation_deg", 1.0),
+    "filter_width_nm": ("receive.filter_width_m", 1e-9),
+}
+CONTROL_OF = {name: (key, factor) for key, (name, factor) in LINK_NAMES.items()}
+CHOICES = {"preset": "preset", "sun.mode": "sun_mode"}  # link name -> control
 IGNORED = ("token",)  # the page's access token rides in the same query
 
 
@@ -34,11 +41,10 @@ def link_settings(controls: Controls, initial: Controls) -> dict[str, str]:
     """The query settings that reproduce ``controls`` (materials only where they differ from
     ``initial``'s), in SI units, each value as text."""
     settings = {}
-    for key, name in LINK_NAMES.items():
+    for key, (name, factor) in LINK_NAMES.items():
         value = getattr(controls, key)
-        if key == "pulse_energy_mj":
-            value = value * 1e-3
-        settings[name] = _text(value)
+        settings[name] = _text(value * factor if factor != 1.0 else value)
+    settings["sun.mode"] = controls.sun_mode
     if controls.preset == "custom":
         settings["fidelity.subrays"] = str(controls.subrays)
     else:
@@ -68,9 +74,10 @@ def controls_from_link(settings: Any, initial: Controls) -> tuple[Controls, list
         if not isinstance(name, str) or name in IGNORED:
             continue
         if name in CONTROL_OF:
-            raw[CONTROL_OF[name]] = _energy_mj(value) if name == "pulse_energy_j" else value
-        elif name == "preset":
-            raw["preset"] = value
+            key, factor = CONTROL_OF[name]
+            raw[key] = value if factor == 1.0 else _display(value, factor)
+        elif name in CHOICES:
+            raw[CHOICES[name]] = value
         elif name == "fidelity.subrays":
             raw["subrays"] = value
             raw.setdefault("preset", "custom")
@@ -84,12 +91,13 @@ def controls_from_link(settings: Any, initial: Controls) -> tuple[Controls, list
     return controls, messages
 
 
-def _energy_mj(value: Any) -> Any:
-    """A link's pulse energy [J] in the control's mJ (anything that is no number is passed on
-    for the sanitiser to refuse). Divided, not multiplied by 1e3: the scene's energy, mJ x 1e-3,
-    then comes back bit for bit (checked on 200,000 slider values; x 1e3 missed 12 %)."""
+def _display(value: Any, factor: float) -> Any:
+    """A link's SI value in the control's display unit (anything that is no number is passed on
+    for the sanitiser to refuse). Divided by the factor, not multiplied by its inverse: the
+    scene's value, display x factor, then comes back bit for bit (checked on 200,000 slider
+    energies; x 1e3 missed 12 % of them)."""
     try:
-        return float(value) / 1e-3
+        return float(value) / factor
     except (TypeError, ValueError, OverflowError):
         return value
 

@@ -19,6 +19,10 @@ def scene_overrides(controls: Controls) -> dict[str, object]:
         "seed": int(controls.seed),
         **fidelity_overrides(controls),
         "target.materials": dict(controls.materials),
+        "sun.mode": controls.sun_mode,
+        "sun.azimuth_deg": float(controls.sun_azimuth_deg),
+        "sun.elevation_deg": float(controls.sun_elevation_deg),
+        "receive.filter_width_m": float(controls.filter_width_nm) * 1e-9,
     }
 
 

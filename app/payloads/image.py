@@ -10,10 +10,20 @@ from app.payloads.style import NO_ECHO_RGB, POWER_CMAP, RANGE_CMAP, colorbar
 
 
 def array_image(result: simcore.Result, kind: str) -> dict:
-    """The n x n array as a PNG (row 0 at the top) with its colour bar: measured range [m] or
+    """The n x n array as a PNG (row 0 at the top) with its colour bar: measured range [m],
     band-limited peak power (log scale, from the 2nd percentile up, weaker echoes saturate at
-    the bottom colour) per pixel; pixels without a value are dark."""
-    if kind == "peak_power":
+    the bottom colour) or background power at the detector (log scale) per pixel; pixels without
+    a value are dark."""
+    if kind == "background":
+        values = np.asarray(result.background.power_w, dtype=np.float64)
+        valid = values > 0
+        logs = np.log10(np.where(valid, values, 1.0))
+        lo, hi = _finite_range(logs[valid])
+        unit = encode.normalized(logs, lo, hi)
+        title = "Background power (log)" if valid.any() else "Background: none (no Sun)"
+        bar = colorbar(title, POWER_CMAP, encode.si_text(10**lo, "W"), encode.si_text(10**hi, "W"))
+        cmap = POWER_CMAP
+    elif kind == "peak_power":
         values = np.asarray(result.peak_power_image_w, dtype=np.float64)
         valid = values > 0
         logs = np.log10(np.where(valid, values, 1.0))

@@ -8,6 +8,7 @@ import numpy as np
 
 import simcore
 from app.payloads.charts import base_layout, note, vline
+from app.payloads.encode import si_text
 from app.payloads.style import SNR_FLOOR
 
 
@@ -35,7 +36,39 @@ def stats_rows(summary: dict) -> list[dict]:
             "label": "Median range σ",
             "value": "–" if sigma is None else f"{sigma * 100:.3g} cm",
         },
+        *_background_rows(summary),
     ]
+
+
+def _background_rows(summary: dict) -> list[dict]:
+    """By day: the Sun's angle, sunlit and Earth pixels, the median background power and its
+    share of the noise (from the receiver's figures); one row saying so at night."""
+    scene_sun = (summary.get("scene") or {}).get("sun") or {}
+    if scene_sun.get("mode", "none") == "none":
+        return [{"label": "Background light", "value": "none (no Sun)"}]
+    if summary.get("eclipsed"):
+        return [{"label": "Background light", "value": "none (target in the Earth's shadow)"}]
+    sunlit, earth = summary.get("n_sunlit_pixels", 0), summary.get("n_earth_pixels", 0)
+    rows = [
+        {"label": "Sun from the line of sight", "value": f"{summary.get('sun_angle_deg', 0):.1f}°"},
+        {"label": "Sunlit / Earth pixels", "value": f"{sunlit:,d} / {earth:,d}"},
+        {
+            "label": "Median background power",
+            "value": si_text(summary.get("background_power_w_median", 0.0), "W"),
+        },
+    ]
+    figures = summary.get("noise_figures") or {}
+    current = figures.get("background_current_a_max")
+    if current is not None:
+        rows.append({"label": "Max background current", "value": si_text(current, "A")})
+    share = figures.get("background_noise_share_median")
+    if share is not None:
+        rows.append({"label": "Background share of noise var.", "value": f"{100 * share:.0f} %"})
+    if summary.get("n_saturated"):
+        rows.append(
+            {"label": "Saturated pixels (no point)", "value": f"{summary['n_saturated']:,d}"}
+        )
+    return rows
 
 
 def stage_rows(timings_s: dict[str, float], extra_s: dict[str, float]) -> list[dict]:

@@ -176,6 +176,7 @@ def waveform_figure(result: simcore.Result, selection: list) -> dict:
                 "hovertemplate": "%{y:.4g}<extra>threshold</extra>",
             }
         )
+        data += _background_traces(waves, result.scene.timing.tnr, times, scale)
     if not waves:
         annotations.append(note("Click a pixel of the detector array to see its echo"))
     elif not any(len(w.t_s) for w in waves):
@@ -199,6 +200,38 @@ def waveform_figure(result: simcore.Result, selection: list) -> dict:
     layout["xaxis"]["tickformat"] = ",.0f"
     layout["xaxis"]["hoverformat"] = ",.2f"
     return {"data": data, "layout": layout}
+
+
+def _background_traces(waves: list, tnr: float, times: list, scale: float) -> list[dict]:
+    """By day: the first selected pixel's background power (a steady level, which the AC-coupled
+    readout removes: only its shot noise stays) and the noise band +-sigma_n (threshold / TNR)
+    about zero. Nothing at night."""
+    w = waves[0]
+    if w.background_w <= 0 or not math.isfinite(w.threshold_w):
+        return []
+    x = [min(times) * 1e9, max(times) * 1e9]
+    sigma = w.threshold_w / tnr
+    band = {
+        "type": "scatter",
+        "mode": "lines",
+        "x": x + x[::-1],
+        "y": [sigma / scale] * 2 + [-sigma / scale] * 2,
+        "fill": "toself",
+        "fillcolor": "rgba(255, 179, 0, 0.18)",
+        "line": {"width": 0},
+        "name": f"noise ±σn = {encode.si_text(sigma, 'W')} (threshold ÷ TNR)",
+        "hoverinfo": "skip",
+    }
+    level = {
+        "type": "scatter",
+        "mode": "lines",
+        "x": x,
+        "y": [w.background_w / scale] * 2,
+        "name": f"background {encode.si_text(w.background_w, 'W')} (steady: AC-coupled out)",
+        "line": {"color": "#ff8f00", "width": 1.5, "dash": "dot"},
+        "hovertemplate": "%{y:.4g}<extra>background</extra>",
+    }
+    return [band, level]
 
 
 def _no_echo_trace(w: simcore.Waveform, color: str) -> dict:

@@ -247,6 +247,33 @@ def downloads() -> None:
             )
 
 
+def sunlight() -> None:
+    """The Sun (none: the paper's dark sky; manual: azimuth and elevation in the target's body
+    frame; from the orbit: the epoch's ephemeris and the fly-around's time) and the receiver's
+    band-pass filter, which decides how much of its light gets in."""
+    labelled_toggle(
+        "Sun",
+        "sun_mode",
+        [
+            ("None", "none", "sun-none"),
+            ("Manual", "manual", "sun-manual"),
+            ("Orbit", "orbit", "sun-orbit"),
+        ],
+        div_classes="control control-sun_mode",
+    )
+    with html.Div(v_show="sun_mode === 'manual'", classes="sun-manual-controls"):
+        slider("sun_azimuth_deg")
+        slider("sun_elevation_deg")
+    with html.Div(v_show="sun_mode !== 'none'", classes="sun-filter-controls"):
+        slider("filter_width_nm")
+        html.Div(
+            "Orbit: the Sun from the JPL DE421 ephemeris at the scene's epoch and, in fly-around "
+            "mode, each frame's time; in the Earth's shadow there is none. The sunlit Earth "
+            "behind the target adds its light. Array image: Background shows it per pixel.",
+            classes="text-caption hint",
+        )
+
+
 def section(title: str) -> None:
     html.Div(title, classes="section-title text-overline")
 
@@ -274,6 +301,8 @@ def drawer_content() -> None:
             slider(key)
         fidelity_choice()
         seed_field()
+        section("Sunlight (background light)")
+        sunlight()
         materials_panel()
         upload_panel()
         share_panel()

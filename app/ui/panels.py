@@ -29,7 +29,11 @@ def array_card() -> None:
             v3.VSpacer()
             button_toggle(
                 "image_kind",
-                [("Range", "range", ""), ("Peak power", "peak_power", "")],
+                [
+                    ("Range", "range", ""),
+                    ("Peak power", "peak_power", ""),
+                    ("Background", "background", "image-background"),
+                ],
                 size="x-small",
                 classes="image-kind",
                 label="Array image shows",

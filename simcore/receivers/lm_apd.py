@@ -111,6 +111,12 @@ def _respond_with_background(scene, echo, background, rx, peak_w, i_pk_a) -> LmA
     figures = _noise_figures(rx)
     figures["background_current_a_max"] = float(background_a.max())
     figures["sigma_n_pixel_a_max"] = float(sigma_n_pixel_a.max())
+    # the background's share of each pixel's signal-free noise variance [1]
+    share = 1.0 - (rx.sigma_n_a / np.maximum(sigma_n_pixel_a, rx.sigma_n_a)) ** 2
+    figures["background_noise_share_max"] = float(share.max())
+    figures["background_noise_share_median"] = (
+        float(np.median(share[echo.pixel])) if len(echo.pixel) else 0.0
+    )
     return LmApdResponse(
         peak_power_w=peak_w,
         snr=snr,

@@ -29,6 +29,8 @@ BASE = {
     "timing.range_gate_m": 60.0,
 }
 REFINE = {"fidelity.refine_subrays": 16}  # for the keys that only act when refining
+GM = {"receiver.kind": "gm_apd"}  # for the Geiger-mode receiver's keys
+GM_SHORT_DEAD = {**GM, "gm.dead_time_s": 20e-9}  # re-arming inside the 400 ns gate
 # key -> (new value, extra base keys that make the key matter)
 ALTERNATIVES = {
     "preset": ("interactive", {}),
@@ -90,6 +92,15 @@ ALTERNATIVES = {
     "fidelity.cell_spread": (True, {}),
     "fidelity.noise_model": ("montecarlo", {}),
     "receiver.kind": (KIND, {}),
+    "gm.pde": (0.5, GM),
+    "gm.dark_count_rate_hz": (5e6, GM),
+    "gm.dead_time_s": (20e-9, GM),
+    "gm.jitter_s": (500e-12, GM),
+    "gm.bin_s": (100e-12, GM),
+    "gm.pulses": (30, GM),
+    "gm.crosstalk": (0.2, GM),
+    "gm.afterpulsing": (0.3, GM_SHORT_DEAD),
+    "gm.coates": (False, GM),
 }
 # keys whose change leaves this scene's arrays as they were, and why
 INERT = {

@@ -78,6 +78,7 @@ def noisy_band_limited(
     band: BandLimit,
     noise: bool,
     add_signal: bool = True,
+    photon=None,
 ) -> np.ndarray:
     """Add the white current noise to the padded signal ``x`` IN PLACE, band-limit it.
 
@@ -86,6 +87,8 @@ def noisy_band_limited(
     Returns y : (n, L) band-limited current [A] ('valid' convolution: y[j] is at x's sample j + m).
     With ``add_signal=False`` y holds the band-limited noise only (its shot part still follows x):
     the caller adds the band-limited signal itself (the gate adds it in closed form).
+    ``photon`` (a :class:`simcore.montecarlo.photon.PhotonNoise`): the shot and bulk dark noise
+    drawn photon by photon with McIntyre gains instead (docs/physics.md#mcintyre).
 
     The white sample variance ``S(t) / (2 dt)`` is drawn as a signal-free part for every sample
     plus an independent shot part where i_s > 0: the same normal law. The convolution is linear,
@@ -99,7 +102,12 @@ def noisy_band_limited(
     n_cols = x.shape[1]
     taps = band.taps.astype(x.dtype)[None, :]
     rows = np.flatnonzero((x > 0).any(axis=1)) if add_signal or noise else np.zeros(0, np.int64)
-    if noise:
+    if noise and photon is not None:  # photon statistics (montecarlo.photon.PhotonNoise)
+        white = rng.standard_normal(x.shape, dtype=x.dtype)
+        white *= x.dtype.type(photon.gaussian_sigma_a(receiver, dt))
+        photon.add_noise(rng, white, x, dt, receiver)
+        y = signal.fftconvolve(white, taps, mode="valid", axes=1)
+    elif noise:
         white = rng.standard_normal(x.shape, dtype=x.dtype)
         white *= x.dtype.type(receiver.sigma_n_a / math.sqrt(2.0 * dt * receiver.bandwidth_hz))
         if len(rows):

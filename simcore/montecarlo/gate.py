@@ -95,6 +95,7 @@ class _GateSetup:
     weights: np.ndarray  # (n_lit, K), per joule
     window_lo: np.ndarray  # (n_lit,) detection window [s]
     window_hi: np.ndarray
+    photon: Any = None  # photon.PhotonNoise, or None for Gaussian shot and dark noise
 
 
 def _signal_into(x: np.ndarray, setup: _GateSetup, lit: np.ndarray, local_rows: np.ndarray):
@@ -159,7 +160,9 @@ def _gate_chunk(setup: _GateSetup, p0: int, p1: int, rng: np.random.Generator):
     lit = setup.lit_of_pixel[p0:p1]
     local = np.flatnonzero(lit >= 0)
     _signal_into(x, setup, lit[local], local)
-    y = noisy_band_limited(rng, x, setup.receiver, setup.band, setup.noise, add_signal=False)
+    y = noisy_band_limited(
+        rng, x, setup.receiver, setup.band, setup.noise, add_signal=False, photon=setup.photon
+    )
     _filtered_signal_into(y, setup, lit[local], local)
     t1 = time.perf_counter()
     stops = discriminate(
@@ -232,6 +235,7 @@ def montecarlo_gate(
     arming: str = "continuous",
     max_bytes: int = _DEFAULT_MAX_BYTES,
     n_threads: int = _THREADS,
+    photon: Any = None,
 ) -> McResult:
     """Waveform Monte Carlo of one flash over the whole gate of every pixel
     (docs/physics.md#monte-carlo).
@@ -259,6 +263,8 @@ def montecarlo_gate(
     arming : "continuous" (an analog comparator) or "sampled" (crossings between samples only)
     max_bytes : int -- working set per worker thread [bytes]
     n_threads : int -- worker threads (numpy and scipy.fft release the GIL)
+    photon : photon.PhotonNoise, optional -- Poisson photoelectrons with McIntyre gains for
+        the shot and bulk dark noise (``fidelity.noise_model = "photon"``); None: Gaussian
 
     Returns
     -------
@@ -310,6 +316,7 @@ def montecarlo_gate(
         weights=weights,
         window_lo=window_lo,
         window_hi=window_hi,
+        photon=photon,
     )
     rows = max(1, int(max_bytes) // (_BYTES_PER_SAMPLE * (n_samples + 2 * band.half_width)))
     bounds = [(p, min(p + rows, n_pixels_total)) for p in range(0, n_pixels_total, rows)]
@@ -381,7 +388,8 @@ def montecarlo_detection(
     echo_stage : pipeline.EchoStage -- uses pixel, arrivals_s, weights, shape, dt_s, cfd_delay_s
     receiver_model : ReceiverModel
     scene : Scene -- detector.pixels, laser.pulse_energy_j, timing (tnr, resolution_s,
-        cfd_fraction, range_gate_m) and gate_center_m
+        cfd_fraction, range_gate_m), gate_center_m; fidelity.noise_model = "photon" draws the
+        shot and bulk dark noise photon by photon (detector.excess_noise_k, dark_bulk_a)
     first_stop : bool -- keep only each pixel's first stop (default: multi-stop)
     max_stops : int, optional -- at most this many stops per pixel (the pipeline passes
         ``timing.max_stops``; None: no limit)
@@ -394,6 +402,12 @@ def montecarlo_detection(
     false alarms of every pixel of the array; timings.
     """
     t = scene.timing
+    if scene.fidelity.noise_model == "photon":
+        from .photon import PhotonNoise  # noqa: PLC0415
+
+        options.setdefault(
+            "photon", PhotonNoise(scene.detector.excess_noise_k, scene.detector.dark_bulk_a)
+        )
     return montecarlo_gate(
         rng,
         pixel=echo_stage.pixel,

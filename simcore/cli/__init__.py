@@ -9,6 +9,7 @@
                     [--duration-s SECONDS] [--j2]
     lmapd reproduce --out DIR [--quick] [--seed N]
     lmapd sweep SWEEP.toml --out DIR [--scheduler ADDRESS] [--workers N]
+    lmapd compare [SCENE.toml] [--set NAME=VALUE ...] --out DIR [--quick] [--p-detect 0.95]
 
 One module per subcommand (``add_parser`` registers it, ``run_cli`` runs it), ``common`` for what
 they share. Errors in the user's input (unknown key, value out of range, missing or broken file)
@@ -22,12 +23,21 @@ import argparse
 import os
 import sys
 
-from . import app, bench, flyaround, keys, reproduce, simulate, sweep
+from . import app, bench, compare, flyaround, keys, reproduce, simulate, sweep
 from .common import EXIT_USAGE, CliError, one_line, say
 
 __all__ = ["EXIT_USAGE", "CliError", "build_parser", "main", "run", "say"]
 
-SUBCOMMANDS = (simulate, keys, bench, app, flyaround, reproduce, sweep)  # in --help's order
+SUBCOMMANDS = (
+    simulate,
+    keys,
+    bench,
+    app,
+    flyaround,
+    reproduce,
+    sweep,
+    compare,
+)  # in --help's order
 # commands after which the process ends without the interpreter's teardown (unloading numpy,
 # scipy and the rest takes ~0.1 s once the work is done): they leave no thread that must finish,
 # no child process and no open file behind (their outputs are written and renamed into place)

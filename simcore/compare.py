@@ -52,23 +52,11 @@ def pulses_needed(scene: Scene, result, p_target: float) -> float:
         return float(n) if n <= MAX_PULSES else math.inf
     from .receivers import gm_apd  # noqa: PLC0415
 
-    k_t = np.asarray(result.detection.threshold_counts)[result.echo.pixel]
     for n in np.unique(np.geomspace(1, MAX_PULSES, 60).astype(int)):
         s = with_overrides(scene, {"gm.pulses": int(n)})
-        k_n = gm_apd.threshold_counts(
-            s.gm.pulses
-            * result.receiver.rate_hz[result.echo.pixel]
-            * s.gm.bin_s
-            * gm_apd.window_bins(s, result.echo),
-            (2 * s.timing.range_gate_m / 299_792_458.0)
-            / s.gm.bin_s
-            / gm_apd.window_bins(s, result.echo),
-            gm_apd.false_alarm_probability(s.timing.tnr),
-        )
-        p_d, _ = gm_apd._predicted(s, result.echo, result.receiver, k_n)
+        p_d = gm_apd.frame_detection_probability(s, result.echo, result.receiver)
         if float(np.median(p_d)) >= p_target:
             return float(n)
-    del k_t
     return math.inf
 
 

@@ -364,6 +364,17 @@ def detect(scene: Scene, echo: EchoStage, rx: GmResponse) -> GmDetection:
     )
 
 
+def frame_detection_probability(scene: Scene, echo: EchoStage, rx: GmResponse) -> np.ndarray:
+    """(n,) predicted P_d of each lit pixel for a frame of ``scene.gm.pulses`` pulses (its own
+    threshold included): the pulses a given P_d needs, without simulating them."""
+    gm = scene.gm
+    width = window_bins(scene, echo)
+    mu = gm.pulses * rx.rate_hz[echo.pixel] * gm.bin_s * width
+    n_windows = rx.histogram.n_bins / width
+    k_t = threshold_counts(mu, n_windows, false_alarm_probability(scene.timing.tnr))
+    return _predicted(scene, echo, rx, k_t)[0]
+
+
 def _predicted(scene: Scene, echo: EchoStage, rx: GmResponse, k_t):
     """(n,) detection probability and range sigma from the expected counts: the peak window's
     counts are Binomial(N, p) with p the per-pulse chance of an avalanche in it (signal or

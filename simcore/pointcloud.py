@@ -79,9 +79,10 @@ def assemble_cloud(
 def stage_cloud(
     scene: Scene, rays: RayGrid, echo: EchoStage, response: Response, det: Detection
 ) -> PointCloud:
-    """The cloud stage: detected target pixels at their measured ranges, then the outliers."""
+    """The cloud stage: detected target pixels at their measured ranges, then the outliers;
+    the shared attributes (ATTRIBUTES) and the receiver's own (``Detection.point_attributes``)."""
     k = det.detected
-    return assemble_cloud(
+    cloud = assemble_cloud(
         rays.pixel_directions,
         rays.pixels,
         echo.pixel[k],
@@ -93,6 +94,9 @@ def stage_cloud(
         det.outliers.pixel,
         det.outliers.range_m,
     )
+    for name, (lit_values, outlier_values) in det.point_attributes.items():
+        cloud.attributes[name] = np.concatenate([np.asarray(lit_values)[k], outlier_values])
+    return cloud
 
 
 CLOUD = Stage(

@@ -151,6 +151,7 @@ class Result:
         n_target_points = len(self.cloud) - n_out
         finite_sigma = d.range_sigma_m[d.detected]
         return {
+            "receiver_kind": self.scene.receiver.kind,
             "n_pixels": self.pixels**2,
             "n_hit_pixels": n_hit,
             "n_lit_pixels": n_lit,

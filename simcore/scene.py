@@ -276,9 +276,56 @@ class Fidelity:
     noise_model: str = _f(
         "statistical",
         "-",
-        doc="statistical (Section 4: Eqs. 27-28 drawn) or montecarlo (Section 5: noisy "
-        "waveforms through the discriminator)",
-        choices=("statistical", "montecarlo"),
+        doc="statistical (Section 4: Eqs. 27-28 drawn), montecarlo (Section 5: noisy "
+        "waveforms through the discriminator) or photon (the waveform Monte Carlo with Poisson "
+        "photoelectrons, each multiplied by a gain drawn from McIntyre's distribution)",
+        choices=("statistical", "montecarlo", "photon"),
+    )
+
+
+# The most pulses one Geiger-mode frame may accumulate: 10^4 pulses of a 256 x 256 array are
+# 6.6e8 pixel-pulses (minutes on two cores); more is a different instrument (a long dwell).
+MAX_GM_PULSES = 10_000
+
+
+@dataclass(frozen=True)
+class GeigerMode:
+    pde: float = _f(
+        0.3,
+        "1",
+        0.0,
+        1.0,
+        "Geiger-mode photon detection efficiency (InGaAs GM-APD at 1064 nm)",
+        lo_open=True,
+    )
+    dark_count_rate_hz: float = _f(
+        10e3, "Hz", 0.0, 1e9, "Geiger-mode dark count rate per pixel (armed)"
+    )
+    dead_time_s: float = _f(
+        1e-6,
+        "s",
+        0.0,
+        1.0,
+        "Geiger-mode dead time after each avalanche: non-paralysable, re-armed at each gate "
+        "opening (longer than the gate: first photon only)",
+    )
+    jitter_s: float = _f(
+        200e-12, "s", 0.0, 1e-6, "Geiger-mode timing jitter (rms, Gaussian)", lo_open=True
+    )
+    bin_s: float = _f(
+        250e-12, "s", 0.0, 1e-6, "Geiger-mode TDC bin width of the histogram", lo_open=True
+    )
+    pulses: int = _f(
+        100, "1", 1, MAX_GM_PULSES, "Geiger-mode pulses per frame, histogrammed per pixel"
+    )
+    crosstalk: float = _f(
+        0.0, "1", 0.0, 0.5, "Geiger-mode crosstalk: chance an avalanche fires a 4-neighbour"
+    )
+    afterpulsing: float = _f(
+        0.0, "1", 0.0, 0.5, "Geiger-mode afterpulsing: chance an avalanche fires again on re-arm"
+    )
+    coates: bool = _f(
+        True, "-", doc="Geiger-mode range from the Coates-corrected histogram (false: raw counts)"
     )
 
 
@@ -368,7 +415,7 @@ class Background:
 # names the module of each), then those a module registers (``simcore.receivers.register`` adds
 # them here). The scene holds only the names, so it depends on no receiver.
 DEFAULT_RECEIVER = "lm_apd"
-RECEIVER_KINDS: list[str] = [DEFAULT_RECEIVER]
+RECEIVER_KINDS: list[str] = [DEFAULT_RECEIVER, "gm_apd"]
 
 
 def receiver_kinds() -> tuple[str, ...]:
@@ -381,7 +428,8 @@ class ReceiverSelection:
     kind: str = _f(
         DEFAULT_RECEIVER,
         "-",
-        doc="the receiver behind the optics: lm_apd (the linear-mode APD chain, Eqs. 7-28)",
+        doc="the receiver behind the optics: lm_apd (the linear-mode APD chain, Eqs. 7-28) or "
+        "gm_apd (a Geiger-mode single-photon array, the gm.* keys)",
         choices=receiver_kinds,
     )
 
@@ -474,6 +522,7 @@ class Scene:
     sun: Sun = field(default_factory=Sun)
     orbit: Orbit = field(default_factory=Orbit)
     background: Background = field(default_factory=Background)
+    gm: GeigerMode = field(default_factory=GeigerMode)
 
     def __post_init__(self):
         validate(self)
@@ -523,6 +572,7 @@ SECTIONS = {
     "sun": Sun,
     "orbit": Orbit,
     "background": Background,
+    "gm": GeigerMode,
 }
 
 # The quick parameters shared by the CLI --set, the app state and the Python keyword API.
@@ -612,7 +662,7 @@ def _check_time_step(scene: Scene) -> None:
             f"fidelity.time_step_s = {dt:g} s is too fine: give 0 (auto) or at least "
             f"{floor_s:g} s (10 ps, and laser.pulse_width_s / {MAX_SAMPLES_PER_PULSE})"
         )
-    if scene.fidelity.noise_model != "montecarlo":
+    if scene.fidelity.noise_model not in ("montecarlo", "photon"):
         return
     step_s = dt or auto_time_step_s(scene)
     samples = 2.0 * scene.timing.range_gate_m / SPEED_OF_LIGHT_M_S / step_s
@@ -620,8 +670,8 @@ def _check_time_step(scene: Scene) -> None:
         raise SceneError(
             f"timing.range_gate_m = {scene.timing.range_gate_m:g} m at a time step of "
             f"{step_s:.3g} s is {samples:.3g} samples per pixel for fidelity.noise_model = "
-            f"montecarlo (at most {MAX_GATE_SAMPLES}): shorten the gate or give a coarser "
-            "fidelity.time_step_s"
+            f"{scene.fidelity.noise_model} (at most {MAX_GATE_SAMPLES}): shorten the gate or "
+            "give a coarser fidelity.time_step_s"
         )
 
 

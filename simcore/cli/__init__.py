@@ -11,6 +11,7 @@
                     [--duration-s SECONDS] [--j2]
     lmapd reproduce --out DIR [--quick] [--seed N]
     lmapd sweep SWEEP.toml --out DIR [--scheduler ADDRESS] [--workers N]
+    lmapd compare [SCENE.toml] [--set NAME=VALUE ...] --out DIR [--quick] [--p-detect 0.95]
 
 One module per subcommand (``add_parser`` registers it, ``run_cli`` runs it), ``common`` for what
 they share. Errors in the user's input (unknown key, value out of range, missing or broken file)
@@ -24,13 +25,35 @@ import argparse
 import os
 import sys
 
-from . import app, bench, flyaround, keys, reproduce, simulate, sweep, target_info, targets
+from . import (
+    app,
+    bench,
+    compare,
+    flyaround,
+    keys,
+    reproduce,
+    simulate,
+    sweep,
+    target_info,
+    targets,
+)
 from .common import EXIT_USAGE, CliError, one_line, say
 
 __all__ = ["EXIT_USAGE", "CliError", "build_parser", "main", "run", "say"]
 
 # in --help's order
-SUBCOMMANDS = (simulate, keys, targets, target_info, bench, app, flyaround, reproduce, sweep)
+SUBCOMMANDS = (
+    simulate,
+    keys,
+    targets,
+    target_info,
+    bench,
+    app,
+    flyaround,
+    reproduce,
+    sweep,
+    compare,
+)
 # commands after which the process ends without the interpreter's teardown (unloading numpy,
 # scipy and the rest takes ~0.1 s once the work is done): they leave no thread that must finish,
 # no child process and no open file behind (their outputs are written and renamed into place)

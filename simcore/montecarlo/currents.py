@@ -79,6 +79,7 @@ def noisy_band_limited(
     noise: bool,
     add_signal: bool = True,
     row_scale: np.ndarray | None = None,
+    photon=None,
 ) -> np.ndarray:
     """Add the white current noise to the padded signal ``x`` IN PLACE, band-limit it.
 
@@ -89,6 +90,9 @@ def noisy_band_limited(
     the caller adds the band-limited signal itself (the gate adds it in closed form).
     ``row_scale`` (n,): each row's signal-free noise over sigma_n (a pixel's background light
     adds its shot noise, 2 q i_bg0 M^2 F F_chain to S: docs/physics.md#background-noise); None: 1.
+    ``photon`` (a :class:`simcore.montecarlo.photon.PhotonNoise`): the shot and bulk dark noise
+    drawn photon by photon with McIntyre gains instead (docs/physics.md#mcintyre); a row's
+    background shot noise (``row_scale``) is then added as Gaussian noise.
 
     The white sample variance ``S(t) / (2 dt)`` is drawn as a signal-free part for every sample
     plus an independent shot part where i_s > 0: the same normal law. The convolution is linear,
@@ -102,7 +106,16 @@ def noisy_band_limited(
     n_cols = x.shape[1]
     taps = band.taps.astype(x.dtype)[None, :]
     rows = np.flatnonzero((x > 0).any(axis=1)) if add_signal or noise else np.zeros(0, np.int64)
-    if noise:
+    if noise and photon is not None:  # photon statistics (montecarlo.photon.PhotonNoise)
+        white = rng.standard_normal(x.shape, dtype=x.dtype)
+        white *= x.dtype.type(photon.gaussian_sigma_a(receiver, dt))
+        photon.add_noise(rng, white, x, dt, receiver)
+        if row_scale is not None:  # the background's shot noise stays Gaussian here
+            extra = np.sqrt(np.maximum(np.asarray(row_scale, dtype=np.float64) ** 2 - 1.0, 0.0))
+            sigma_w = receiver.sigma_n_a / math.sqrt(2.0 * dt * receiver.bandwidth_hz)
+            white += (rng.standard_normal(x.shape) * (sigma_w * extra)[:, None]).astype(x.dtype)
+        y = signal.fftconvolve(white, taps, mode="valid", axes=1)
+    elif noise:
         white = rng.standard_normal(x.shape, dtype=x.dtype)
         white *= x.dtype.type(receiver.sigma_n_a / math.sqrt(2.0 * dt * receiver.bandwidth_hz))
         if row_scale is not None:

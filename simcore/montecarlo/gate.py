@@ -98,6 +98,7 @@ class _GateSetup:
     window_hi: np.ndarray
     noise_scale: np.ndarray | None = None  # (n_total,) sigma_n,pixel / sigma_n (background)
     per_pixel_threshold: bool = False  # arm at TNR sigma_n,pixel instead of TNR sigma_n
+    photon: Any = None  # photon.PhotonNoise, or None for Gaussian shot and dark noise
 
 
 def _signal_into(x: np.ndarray, setup: _GateSetup, lit: np.ndarray, local_rows: np.ndarray):
@@ -175,7 +176,14 @@ def _gate_chunk(setup: _GateSetup, p0: int, p1: int, rng: np.random.Generator):
     _signal_into(x, setup, lit[local], local)
     scale = None if setup.noise_scale is None else setup.noise_scale[p0:p1]
     y = noisy_band_limited(
-        rng, x, setup.receiver, setup.band, setup.noise, add_signal=False, row_scale=scale
+        rng,
+        x,
+        setup.receiver,
+        setup.band,
+        setup.noise,
+        add_signal=False,
+        row_scale=scale,
+        photon=setup.photon,
     )
     _filtered_signal_into(y, setup, lit[local], local)
     if scale is not None and setup.per_pixel_threshold:
@@ -256,6 +264,7 @@ def montecarlo_gate(
     n_threads: int = _THREADS,
     background_a=None,
     per_pixel_threshold: bool = False,
+    photon: Any = None,
 ) -> McResult:
     """Waveform Monte Carlo of one flash over the whole gate of every pixel
     (docs/physics.md#monte-carlo).
@@ -288,6 +297,8 @@ def montecarlo_gate(
         (docs/physics.md#background-noise); its DC level is removed (AC coupling)
     per_pixel_threshold : bool -- arm each pixel at TNR x its own signal-free noise (with
         ``background_a``); False: TNR x a dark pixel's sigma_n
+    photon : photon.PhotonNoise, optional -- Poisson photoelectrons with McIntyre gains for
+        the shot and bulk dark noise (``fidelity.noise_model = "photon"``); None: Gaussian
 
     Returns
     -------
@@ -341,6 +352,7 @@ def montecarlo_gate(
         window_hi=window_hi,
         noise_scale=_noise_scale(receiver, background_a, n_pixels_total),
         per_pixel_threshold=bool(per_pixel_threshold),
+        photon=photon,
     )
     rows = max(1, int(max_bytes) // (_BYTES_PER_SAMPLE * (n_samples + 2 * band.half_width)))
     bounds = [(p, min(p + rows, n_pixels_total)) for p in range(0, n_pixels_total, rows)]
@@ -423,7 +435,8 @@ def montecarlo_detection(
     echo_stage : pipeline.EchoStage -- uses pixel, arrivals_s, weights, shape, dt_s, cfd_delay_s
     receiver_model : ReceiverModel
     scene : Scene -- detector.pixels, laser.pulse_energy_j, timing (tnr, resolution_s,
-        cfd_fraction, range_gate_m) and gate_center_m
+        cfd_fraction, range_gate_m), gate_center_m; fidelity.noise_model = "photon" draws the
+        shot and bulk dark noise photon by photon (detector.excess_noise_k, dark_bulk_a)
     first_stop : bool -- keep only each pixel's first stop (default: multi-stop)
     max_stops : int, optional -- at most this many stops per pixel (the pipeline passes
         ``timing.max_stops``; None: no limit)
@@ -436,6 +449,12 @@ def montecarlo_detection(
     false alarms of every pixel of the array; timings.
     """
     t = scene.timing
+    if scene.fidelity.noise_model == "photon":
+        from .photon import PhotonNoise  # noqa: PLC0415
+
+        options.setdefault(
+            "photon", PhotonNoise(scene.detector.excess_noise_k, scene.detector.dark_bulk_a)
+        )
     return montecarlo_gate(
         rng,
         pixel=echo_stage.pixel,

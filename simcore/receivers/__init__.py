@@ -16,7 +16,8 @@ A receiver is one module behind one interface, selected by the scene key ``recei
 Each declares the scene values its two steps read (the stages' cache keys). Adding a receiver is
 one module that builds a :class:`Receiver` and calls :func:`register` (built-in ones are named in
 ``BUILT_IN`` and imported on first use): nothing else changes. ``lm_apd`` (the default) is the
-paper's linear-mode APD chain, Eqs. 7-28 (``simcore.receivers.lm_apd``).
+paper's linear-mode APD chain, Eqs. 7-28 (``simcore.receivers.lm_apd``); ``gm_apd`` a
+Geiger-mode single-photon array (``simcore.receivers.gm_apd``).
 """
 
 from __future__ import annotations
@@ -37,7 +38,7 @@ if TYPE_CHECKING:
     from ..echo import EchoStage
 
 # kind -> the module that registers it when imported
-BUILT_IN = {"lm_apd": "simcore.receivers.lm_apd"}
+BUILT_IN = {"lm_apd": "simcore.receivers.lm_apd", "gm_apd": "simcore.receivers.gm_apd"}
 DEFAULT_KIND = DEFAULT_RECEIVER
 _REGISTERED: dict[str, Receiver] = {}
 
@@ -73,6 +74,9 @@ class Detection:
         every pixel, or (pixels**2,) per pixel (flat index) where the background makes pixels
         differ
     outliers : the false-alarm points drawn for this flash
+    point_attributes : a receiver's own per-point attributes, name -> (values of the lit
+        pixels (n,), values of the outliers (n_out,)); the cloud carries them besides its shared
+        set (the Geiger-mode receiver's ``counts`` and ``signal_pe``)
     """
 
     p_detect: np.ndarray
@@ -83,6 +87,7 @@ class Detection:
     threshold_w: float
     n_false_per_pixel: float | np.ndarray
     outliers: Outliers
+    point_attributes: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
 
     @property
     def n_false_expected(self) -> float:

@@ -153,7 +153,8 @@ def _response_reads(s: Scene) -> tuple:
 
 
 def detect(scene: Scene, echo: EchoStage, rx: LmApdResponse) -> LmApdDetection:
-    """Section 4 (or 5 with ``fidelity.noise_model = "montecarlo"``): detections, ranges and
+    """Section 4 (or 5 with ``fidelity.noise_model = "montecarlo"``, or "photon" for its
+    photon statistics, docs/physics.md#mcintyre): detections, ranges and
     false alarms of one flash, seeded from the scene, each pixel recording at most
     ``timing.max_stops`` stops (docs/physics.md#limited-stops). With background light each
     pixel has its own noise: the threshold is TNR x a dark pixel's noise (``timing.
@@ -178,7 +179,7 @@ def detect(scene: Scene, echo: EchoStage, rx: LmApdResponse) -> LmApdDetection:
     p_d = p_echo * detection.echo_survival_probability(t_echo_s, rate_hz, t.max_stops, holdoff_s)
 
     n = len(echo.pixel)
-    if scene.fidelity.noise_model == "montecarlo":
+    if scene.fidelity.noise_model in ("montecarlo", "photon"):
         # Section 5: noisy waveforms through the discriminator decide detections, ranges and
         # false alarms; P_d and sigma above stay the statistical model's, for comparison
         from .. import montecarlo  # noqa: PLC0415  (imported only when the MC model is asked for)

@@ -147,3 +147,15 @@ def test_the_constants_the_help_shows_without_loading_the_library_are_the_librar
     assert fly_cli.DEFAULT_INTERVAL_S == flyaround.DEFAULT_INTERVAL_S
     assert fly_cli.PAPER_PERIOD_S == orbit.PAPER_PERIOD_S
     assert sweep_cli.CLOUD_FORMATS == sweep.spec.CLOUD_FORMATS
+
+
+def test_compare_runs_both_receivers_and_writes_its_table_and_figure(tmp_path):
+    import json
+
+    from simcore.cli import main
+
+    assert main(["compare", "--quick", "--set", "pixels=16", "--out", str(tmp_path)]) == 0
+    rows = json.loads((tmp_path / "compare.json").read_text())
+    assert {r["receiver"] for r in rows} == {"lm_apd", "gm_apd"} and len(rows) == 20
+    assert (tmp_path / "compare.png").stat().st_size > 10_000
+    assert main(["compare", "--p-detect", "1.5", "--out", str(tmp_path)]) == 2

@@ -36,6 +36,8 @@ TLE = (  # the ISS, 2024-03-19 (elements rounded; checksums computed)
     "1 25544U 98067A   24079.50000000  .00016717  00000-0  30180-3 0  999",
     "2 25544  51.6416 247.4627 0006703 130.5360 325.0288 15.4981530844488",
 )
+GM = {"receiver.kind": "gm_apd"}  # for the Geiger-mode receiver's keys
+GM_SHORT_DEAD = {**GM, "gm.dead_time_s": 20e-9}  # re-arming inside the 400 ns gate
 # key -> (new value, extra base keys that make the key matter)
 ALTERNATIVES = {
     "preset": ("interactive", {}),
@@ -114,6 +116,15 @@ ALTERNATIVES = {
     "background.earth": (False, SUN),
     "background.earth_albedo": (0.1, SUN),
     "background.target_altitude_m": (400e3, SUN),
+    "gm.pde": (0.5, GM),
+    "gm.dark_count_rate_hz": (5e6, GM),
+    "gm.dead_time_s": (20e-9, GM),
+    "gm.jitter_s": (500e-12, GM),
+    "gm.bin_s": (100e-12, GM),
+    "gm.pulses": (30, GM),
+    "gm.crosstalk": (0.2, GM),
+    "gm.afterpulsing": (0.3, GM_SHORT_DEAD),
+    "gm.coates": (False, GM),
 }
 # keys whose change leaves this scene's arrays as they were, and why
 INERT = {

@@ -25,17 +25,17 @@ def ideal():
 
 def test_receiver_kind_defaults_to_the_lm_apd_and_refuses_an_unknown_kind():
     assert simcore.Scene().receiver.kind == "lm_apd"
-    assert receivers.kinds() == ("lm_apd",)
+    assert receivers.kinds() == ("lm_apd", "gm_apd")
     row = next(r for r in simcore.key_reference() if r["key"] == "receiver.kind")
-    assert row["valid"] == "lm_apd" and row["default"] == "'lm_apd'"
+    assert row["valid"] == "lm_apd / gm_apd" and row["default"] == "'lm_apd'"
     with pytest.raises(simcore.SceneError, match="receiver.kind = 'ideal' is not valid"):
         simcore.with_overrides(simcore.Scene(), {"receiver.kind": "ideal"})
 
 
 def test_a_registered_receiver_is_a_valid_kind_and_listed_in_the_key_reference(ideal):
-    assert receivers.kinds() == ("lm_apd", KIND)
+    assert receivers.kinds() == ("lm_apd", "gm_apd", KIND)
     row = next(r for r in simcore.key_reference() if r["key"] == "receiver.kind")
-    assert row["valid"] == "lm_apd / ideal"
+    assert row["valid"] == "lm_apd / gm_apd / ideal"
     scene = simcore.with_overrides(simcore.Scene(), {"receiver.kind": KIND})
     assert scene.to_dict()["receiver"] == {"kind": KIND}
     assert simcore.Scene().to_dict()["receiver"] == {"kind": "lm_apd"}  # every key, default too

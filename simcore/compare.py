@@ -1,0 +1,101 @@
+"""The same scene with both receivers (``lmapd compare``): the LM-APD's single flash against the
+Geiger-mode array's frame over distance and pulse energy (docs/physics.md#geiger-mode).
+
+Per (receiver, distance, pulse energy): target points, range noise (the rms of measured less
+noise-free range over the detected pixels), outliers, and the pulses needed for a detection
+probability ``p_target`` in the median lit pixel: for the LM-APD, independent flashes with its
+per-flash P_d (Eq. 27) until one detects, ceil(ln(1 - P) / ln(1 - P_d)); for the Geiger-mode
+array, the least frame length N whose P_d (counts of N pulses against the threshold) reaches P.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .pipeline import Pipeline
+from .scene import Scene, with_overrides
+
+DISTANCES_M = (100.0, 300.0, 1000.0, 3000.0, 10000.0)
+ENERGIES_J = (5e-5, 5e-3)
+RECEIVERS = ("lm_apd", "gm_apd")
+MAX_PULSES = 10_000  # the search for the pulses needed stops here (reported as inf)
+
+
+@dataclass(frozen=True)
+class Row:
+    receiver: str
+    distance_m: float
+    pulse_energy_j: float
+    n_lit: int
+    n_points: int
+    range_noise_m: float
+    n_outliers: int
+    pulses_needed: float
+    signal_pe_median: float
+
+
+def pulses_needed(scene: Scene, result, p_target: float) -> float:
+    """Pulses for P_d >= p_target in the median lit pixel (module docstring); inf if more than
+    MAX_PULSES."""
+    if len(result.echo.pixel) == 0:
+        return math.inf
+    if scene.receiver.kind == "lm_apd":
+        p = float(np.median(result.detection.p_detect))
+        if p >= p_target:
+            return 1.0
+        if p <= 0:
+            return math.inf
+        n = math.ceil(math.log1p(-p_target) / math.log1p(-p))
+        return float(n) if n <= MAX_PULSES else math.inf
+    from .receivers import gm_apd  # noqa: PLC0415
+
+    for n in np.unique(np.geomspace(1, MAX_PULSES, 60).astype(int)):
+        s = with_overrides(scene, {"gm.pulses": int(n)})
+        p_d = gm_apd.frame_detection_probability(s, result.echo, result.receiver)
+        if float(np.median(p_d)) >= p_target:
+            return float(n)
+    return math.inf
+
+
+def compare(
+    base: Scene,
+    distances_m=DISTANCES_M,
+    energies_j=ENERGIES_J,
+    p_target: float = 0.95,
+    progress=None,
+) -> list[Row]:
+    """Every (receiver, distance, energy) of ``base`` (its pixels, target, optics, seed)."""
+    rows = []
+    for kind in RECEIVERS:
+        pipe = Pipeline()
+        for d in distances_m:
+            for e in energies_j:
+                scene = with_overrides(
+                    base, {"receiver.kind": kind, "distance_m": d, "pulse_energy_j": e}
+                )
+                res = pipe.run(scene)
+                det = res.detection
+                err = det.range_m[det.detected] - det.range_true_m[det.detected]
+                pe = getattr(res.receiver, "signal_pe", None)
+                s = res.summary()
+                rows.append(
+                    Row(
+                        receiver=kind,
+                        distance_m=d,
+                        pulse_energy_j=e,
+                        n_lit=s["n_lit_pixels"],
+                        n_points=s["n_target_points"],
+                        range_noise_m=float(np.sqrt(np.mean(err**2))) if len(err) else math.nan,
+                        n_outliers=s["n_outliers"],
+                        pulses_needed=pulses_needed(scene, res, p_target),
+                        signal_pe_median=float(np.median(pe))
+                        if pe is not None and len(pe)
+                        else math.nan,
+                    )
+                )
+                if progress is not None:
+                    progress(rows[-1])
+    return rows

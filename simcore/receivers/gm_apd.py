@@ -1,0 +1,473 @@
+"""The Geiger-mode (single-photon) APD array, ``receiver.kind = "gm_apd"``.
+
+Response (the receiver stage): every pixel's primary event rate, the echo's photoelectrons per
+pulse, and the frame itself: ``gm.pulses`` pulses of avalanches of every pixel
+(:mod:`simcore.receivers.gm_events`: Poisson primaries from the optical echo of Eqs. 1, 29, 30,
+background and dark counts; non-paralysable dead time reset per gate, jitter, TDC bins,
+afterpulsing, crosstalk), kept as a sparse per-pixel histogram.
+
+Detection (the detection stage; a threshold change re-runs only this): each pixel's densest
+window of the width of the pulse, its counts against a threshold set from the expected
+background counts for the false-alarm probability of a Gaussian threshold at ``timing.tnr``,
+and the range by the centroid of the (Coates-corrected, ``gm.coates``) histogram around it
+(:mod:`simcore.receivers.gm_histogram`). A detected window on the echo gives the pixel's point;
+one elsewhere (background, dark counts) an outlier. The single-pulse first-photon cloud is
+:func:`first_photon_cloud`.
+
+The model: docs/physics.md#geiger-mode.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import special
+
+from ..constants import C, H
+from ..detection import Outliers
+from ..echo import EchoStage
+from ..scene import Scene, SceneError
+from . import Detection, Receiver, Response, register
+from . import gm_events as ev
+from . import gm_histogram as gh
+
+MAX_EVENTS = 100_000_000  # expected avalanches per frame at most (~1.3 GB of event records)
+MAX_EVENTS_PER_PULSE = 10_000  # expected avalanches of one pixel in one gate at most
+ECHO_TAIL_SCALES = 12.0  # the analysis window runs 12 s past the echo (Gamma(2) tail 8e-5)
+JITTER_REACH = 4.0  # jitter standard deviations the windows allow either side
+
+
+def background_power_w(scene: Scene, background=None) -> np.ndarray:
+    """(rows, cols) optical background power per pixel at the detector [W]: the background
+    stage's ``power_w``, zeros where there is none (night, or no background stage)."""
+    n = scene.detector.pixels
+    if background is None:
+        return np.zeros((n, n))
+    power_w = np.asarray(getattr(background, "power_w", background), dtype=np.float64)
+    if power_w.shape != (n, n):
+        raise ValueError(f"background power_w has shape {power_w.shape}, expected {(n, n)}")
+    return power_w
+
+
+def photon_energy_j(wavelength_m: float) -> float:
+    """h nu = h c / lambda [J]."""
+    return H * C / wavelength_m
+
+
+@dataclass(frozen=True, kw_only=True)
+class GmResponse(Response):
+    """The Geiger-mode array's response; besides :class:`Response` (``snr``: the frame's
+    expected signal counts over the square root of signal plus background counts in the peak
+    window, S / sqrt(S + B)):
+
+    signal_pe : (n,) mean echo photoelectrons per pulse of each lit pixel, PDE E_r / (h nu) [1]
+    rate_hz : (pixels**2,) constant primary event rate of every pixel (background + dark) [1/s]
+    events : the frame's recorded avalanches (sorted by pixel, bin, pulse)
+    histogram : their sparse per-pixel histogram
+    gate_start_s : time of the gate's opening since emission [s]
+    """
+
+    signal_pe: np.ndarray
+    rate_hz: np.ndarray
+    events: ev.Events
+    histogram: gh.Histogram
+    gate_start_s: float
+
+
+@dataclass(frozen=True, kw_only=True)
+class GmDetection(Detection):
+    """The Geiger-mode detection; besides :class:`Detection` (``threshold_w``: the band-limited
+    peak power of a single-surface echo whose expected peak-window counts reach the threshold):
+
+    threshold_counts : (pixels**2,) counts a pixel's peak window must reach
+    peak_counts : (n,) counts in each lit pixel's peak window (0 where it has no event)
+    first_photon_range_m : (pixels**2,) range of each pixel's first avalanche of the frame's
+        first pulse, NaN where none (the single-pulse first-photon cloud)
+    first_photon_is_echo : (pixels**2,) bool, that avalanche came from the echo's window
+    """
+
+    threshold_counts: np.ndarray
+    peak_counts: np.ndarray
+    first_photon_range_m: np.ndarray
+    first_photon_is_echo: np.ndarray
+
+
+def _gate_s(scene: Scene) -> tuple[float, float]:
+    """Gate opening since emission and gate length [s] (the LM-APD's gate)."""
+    half = scene.timing.range_gate_m / 2.0
+    lo = max(0.0, scene.gate_center_m - half)
+    hi = scene.gate_center_m + half
+    return 2.0 * lo / C, 2.0 * (hi - lo) / C
+
+
+def _detector(scene: Scene) -> ev.Detector:
+    gm = scene.gm
+    return ev.Detector(
+        gate_s=_gate_s(scene)[1],
+        dead_time_s=gm.dead_time_s,
+        jitter_s=gm.jitter_s,
+        bin_s=gm.bin_s,
+        afterpulsing=gm.afterpulsing,
+        crosstalk=gm.crosstalk,
+    )
+
+
+def _check_load(scene: Scene, signal_pe, rate_hz, lit_pixel) -> None:
+    """Refuse frames whose expected avalanches exceed MAX_EVENTS (or one gate's exceed
+    MAX_EVENTS_PER_PULSE), before drawing any: one message naming the keys to change."""
+    gm = scene.gm
+    gate_s = _gate_s(scene)[1]
+    primaries = rate_hz * gate_s
+    primaries[lit_pixel] += signal_pe
+    cap = 1.0 + gate_s / gm.dead_time_s if gm.dead_time_s > 0 else np.inf
+    per_gate = np.minimum(primaries, cap) / (1.0 - gm.afterpulsing)
+    worst = float(per_gate.max()) if len(per_gate) else 0.0
+    if worst > MAX_EVENTS_PER_PULSE:
+        raise SceneError(
+            f"gm.dead_time_s = {gm.dead_time_s:g} s lets a pixel record about {worst:.3g} "
+            f"avalanches per gate (at most {MAX_EVENTS_PER_PULSE:,}): give a longer dead time, "
+            "less pulse energy or a shorter timing.range_gate_m"
+        )
+    total = float(per_gate.sum()) * gm.pulses
+    if total > MAX_EVENTS:
+        raise SceneError(
+            f"gm.pulses = {gm.pulses} gives about {total:.3g} avalanches per frame (at most "
+            f"{MAX_EVENTS:,}): fewer pulses, a longer gm.dead_time_s, fewer pixels or a shorter "
+            "timing.range_gate_m"
+        )
+
+
+def respond(scene: Scene, echo: EchoStage, background=None) -> GmResponse:
+    """The frame: rates, photoelectrons and the avalanches of ``gm.pulses`` pulses."""
+    gm = scene.gm
+    energy_j = scene.laser.pulse_energy_j
+    hv_j = photon_energy_j(scene.laser.wavelength_m)
+    weights = np.asarray(echo.weights)
+    element_pe = gm.pde * energy_j * weights / hv_j
+    signal_pe = element_pe.sum(axis=1)
+    bg_w = background_power_w(scene, background).reshape(-1)
+    rate_hz = gm.pde * bg_w / hv_j + gm.dark_count_rate_hz
+    _check_load(scene, signal_pe, rate_hz, echo.pixel)
+    t_lo, _ = _gate_s(scene)
+    rates = ev.PixelRates(
+        rate_hz=rate_hz,
+        lit_pixel=np.asarray(echo.pixel),
+        element_t_s=np.asarray(echo.arrivals_s) - t_lo,
+        element_pe=element_pe,
+        scale_s=echo.shape.tau_s / echo.shape.a,
+    )
+    det = _detector(scene)
+    rng = np.random.default_rng([scene.seed, 1917])
+    events = ev.simulate_frame(rng, rates, det, gm.pulses)
+    hist = gh.histogram(events, det.n_bins, gm.pulses)
+    s_counts, b_counts = _expected_window_counts(scene, echo, signal_pe, rate_hz[echo.pixel])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        snr = np.where(s_counts > 0, s_counts / np.sqrt(s_counts + b_counts), 0.0)
+    return GmResponse(
+        peak_power_w=echo.features.peak_w_per_j * energy_j,
+        snr=snr,
+        noise_figures={
+            "photon_energy_j": hv_j,
+            "rate_hz_median": float(np.median(rate_hz)),
+            "signal_pe_median": float(np.median(signal_pe)) if len(signal_pe) else 0.0,
+            "events": float(len(events)),
+        },
+        signal_pe=signal_pe,
+        rate_hz=rate_hz,
+        events=events,
+        histogram=hist,
+        gate_start_s=t_lo,
+    )
+
+
+def _response_reads(s: Scene) -> tuple:
+    return (
+        s.laser.pulse_energy_j,
+        s.laser.wavelength_m,
+        s.detector.pixels,
+        s.timing.range_gate_m,
+        s.gate_center_m,
+        s.seed,
+        s.gm.pde,
+        s.gm.dark_count_rate_hz,
+        s.gm.dead_time_s,
+        s.gm.jitter_s,
+        s.gm.bin_s,
+        s.gm.pulses,
+        s.gm.crosstalk,
+        s.gm.afterpulsing,
+    )
+
+
+# ----------------------------------------------------------------------------------------------
+# detection
+# ----------------------------------------------------------------------------------------------
+def window_bins(scene: Scene, echo: EchoStage) -> int:
+    """The peak window: the pulse's FWHM (tau, Eq. 1) widened by the jitter's, in bins (>= 1)."""
+    gm = scene.gm
+    fwhm_s = np.hypot(echo.shape.tau_s * _fwhm_over_tau(echo), 2.3548 * gm.jitter_s)
+    return int(max(1, round(fwhm_s / gm.bin_s)))
+
+
+def _fwhm_over_tau(echo: EchoStage) -> float:
+    """FWHM of Eq. 1's pulse over tau: 1 for a = 2.446 (ours), 0.699 for the paper's 3.5."""
+    from ..pulse import A_FWHM  # noqa: PLC0415
+
+    return A_FWHM / echo.shape.a
+
+
+def window_fraction(scene: Scene, echo: EchoStage) -> float:
+    """The largest share of a single surface's photoelectrons (Gamma(2, s), then jitter and
+    bins) one peak window of :func:`window_bins` can hold [1]."""
+    gm = scene.gm
+    s = echo.shape.tau_s / echo.shape.a
+    w_s = window_bins(scene, echo) * gm.bin_s
+    t = np.linspace(-JITTER_REACH * gm.jitter_s, ECHO_TAIL_SCALES * s, 4001)
+    dt = t[1] - t[0]
+    x = np.maximum(t / s, 0.0)
+    pdf = x * np.exp(-x) / s
+    k = np.arange(-JITTER_REACH * gm.jitter_s, JITTER_REACH * gm.jitter_s + dt, dt)
+    if len(k) > 1:
+        kern = np.exp(-0.5 * (k / gm.jitter_s) ** 2)
+        pdf = np.convolve(pdf, kern / kern.sum(), mode="same")
+    cdf = np.cumsum(pdf) * dt
+    return float(np.max(np.interp(t + w_s, t, cdf, right=cdf[-1]) - cdf))
+
+
+def false_alarm_probability(tnr: float) -> float:
+    """P_fa of a Gaussian threshold at ``tnr`` standard deviations, 0.5 erfc(TNR / sqrt 2)."""
+    return float(0.5 * special.erfc(tnr / np.sqrt(2.0)))
+
+
+def threshold_counts(mu_window, n_windows: float, p_fa: float) -> np.ndarray:
+    """The least count k with n_windows P(Poisson(mu) >= k) <= p_fa, per pixel: over the
+    gate's n_windows independent windows the background reaches k in a pixel with probability
+    at most p_fa (the union bound). At least 1."""
+    mu = np.asarray(mu_window, dtype=np.float64)
+    uniq, inverse = np.unique(mu, return_inverse=True)
+    q = p_fa / max(n_windows, 1.0)
+    k = np.ones(len(uniq))
+    pos = uniq > 0
+    if pos.any():
+        from scipy import stats  # noqa: PLC0415
+
+        k[pos] = stats.poisson.isf(q, uniq[pos]) + 1.0
+    return np.maximum(k, 1.0)[inverse].reshape(mu.shape)
+
+
+def _expected_window_counts(scene: Scene, echo: EchoStage, signal_pe, rate_lit_hz):
+    """(n,) expected signal and background counts of the frame in each lit pixel's peak
+    window: N a (1 - exp(-f N_s)) and N r w, with a the pixel's chance to be armed when the echo
+    comes, exp(-r min(t_echo, d)) (exact for first-photon detection)."""
+    gm = scene.gm
+    t_lo, _ = _gate_s(scene)
+    t_echo = np.maximum(_echo_span_s(echo)[0] - t_lo, 0.0)
+    armed = np.exp(-rate_lit_hz * np.minimum(t_echo, gm.dead_time_s))
+    f = window_fraction(scene, echo)
+    s_counts = gm.pulses * armed * -np.expm1(-f * signal_pe)
+    b_counts = gm.pulses * rate_lit_hz * window_bins(scene, echo) * gm.bin_s
+    return s_counts, b_counts
+
+
+def _echo_span_s(echo: EchoStage) -> tuple[np.ndarray, np.ndarray]:
+    """(n,) first and last element arrival of each lit pixel since emission [s]."""
+    w = np.asarray(echo.weights)
+    a = np.asarray(echo.arrivals_s)
+    has = w > 0
+    first = np.where(has, a, np.inf).min(axis=1)
+    last = np.where(has, a, -np.inf).max(axis=1)
+    return first, last
+
+
+def detect(scene: Scene, echo: EchoStage, rx: GmResponse) -> GmDetection:
+    """Peak windows, thresholds, ranges, outliers and the first-photon cloud of the frame."""
+    gm, t = scene.gm, scene.timing
+    h = rx.histogram
+    n_pixels = scene.detector.pixels**2
+    width = window_bins(scene, echo)
+    s_scale = echo.shape.tau_s / echo.shape.a
+    bg_per_bin = rx.rate_hz * gm.bin_s  # mean primary background events per pulse and bin
+    mu_window = gm.pulses * bg_per_bin * width
+    n_windows = h.n_bins / width
+    p_fa = false_alarm_probability(t.tnr)
+    k_t = threshold_counts(mu_window, n_windows, p_fa)
+
+    peaks = gh.peak_windows(h, width)
+    over = peaks.count >= k_t[peaks.pixel]
+    p_pix, p_start = peaks.pixel[over], peaks.start_bin[over]
+    # the analysis window: from one s and the jitter before the peak window to 12 s after it
+    pre = int(np.ceil((s_scale + JITTER_REACH * gm.jitter_s) / gm.bin_s)) + 1
+    length = pre + int(
+        np.ceil((ECHO_TAIL_SCALES * s_scale + JITTER_REACH * gm.jitter_s) / gm.bin_s)
+    )
+    length = min(length, h.n_bins)
+    dead_bins = int(round(gm.dead_time_s / gm.bin_s)) if gm.dead_time_s < 1.0 else h.n_bins
+    est = gh.centroid_times(
+        h, p_pix, p_start - pre, length, gm.bin_s, bg_per_bin[p_pix], dead_bins, gm.coates
+    )
+    t_mean_s = rx.gate_start_s + est.t_s
+    # range: the centroid less the mean photon delay of Eq. 1's pulse, 2 s (Gamma(2, s))
+    r_est_m = 0.5 * C * (t_mean_s - 2.0 * s_scale)
+
+    lit_of = np.full(n_pixels, -1, dtype=np.int64)
+    lit_of[echo.pixel] = np.arange(len(echo.pixel))
+    first_s, last_s = _echo_span_s(echo)
+    reach_s = JITTER_REACH * gm.jitter_s
+    lo_bin = (first_s - reach_s - rx.gate_start_s) / gm.bin_s
+    hi_bin = (last_s + ECHO_TAIL_SCALES * s_scale + reach_s - rx.gate_start_s) / gm.bin_s
+    li = lit_of[p_pix]
+    on_echo = np.zeros(len(p_pix), dtype=bool)
+    lit_hit = li >= 0
+    on_echo[lit_hit] = (p_start[lit_hit] + width > lo_bin[li[lit_hit]]) & (
+        p_start[lit_hit] <= hi_bin[li[lit_hit]]
+    )
+    good = on_echo & np.isfinite(r_est_m)
+    n = len(echo.pixel)
+    detected = np.zeros(n, dtype=bool)
+    detected[li[good]] = True
+    range_m = np.full(n, np.nan)
+    range_m[li[good]] = r_est_m[good]
+    out = ~on_echo & np.isfinite(r_est_m)
+    outliers = Outliers(pixel=p_pix[out].astype(np.int64), range_m=r_est_m[out])
+
+    peak_counts = np.zeros(n)
+    lit_peak = lit_of[peaks.pixel] >= 0
+    peak_counts[lit_of[peaks.pixel[lit_peak]]] = peaks.count[lit_peak]
+    counts_all = np.zeros(n_pixels)
+    counts_all[p_pix] = peaks.count[over]
+
+    a_num = np.asarray(echo.arrivals_s) * np.asarray(echo.weights)
+    w_sum = np.asarray(echo.weights).sum(axis=1)
+    r_true_m = 0.5 * C * a_num.sum(axis=1) / np.where(w_sum > 0, w_sum, 1.0)
+    p_d, sigma_m = _predicted(scene, echo, rx, k_t[echo.pixel])
+    fp_range, fp_echo = _first_photon(scene, rx, lo_bin, hi_bin, lit_of, s_scale)
+    return GmDetection(
+        p_detect=p_d,
+        detected=detected,
+        range_true_m=r_true_m,
+        range_sigma_m=sigma_m,
+        range_m=range_m,
+        threshold_w=_threshold_power_w(scene, echo, float(np.median(k_t)), bg_per_bin, width),
+        n_false_per_pixel=float(
+            np.mean(np.minimum(1.0, n_windows * special.pdtrc(k_t - 1.0, mu_window)))
+        ),
+        outliers=outliers,
+        threshold_counts=k_t,
+        peak_counts=peak_counts,
+        first_photon_range_m=fp_range,
+        first_photon_is_echo=fp_echo,
+        point_attributes={
+            "counts": (peak_counts, counts_all[outliers.pixel]),
+            "signal_pe": (rx.signal_pe, np.zeros(len(outliers.pixel))),
+        },
+    )
+
+
+def frame_detection_probability(scene: Scene, echo: EchoStage, rx: GmResponse) -> np.ndarray:
+    """(n,) predicted P_d of each lit pixel for a frame of ``scene.gm.pulses`` pulses (its own
+    threshold included): the pulses a given P_d needs, without simulating them."""
+    gm = scene.gm
+    width = window_bins(scene, echo)
+    mu = gm.pulses * rx.rate_hz[echo.pixel] * gm.bin_s * width
+    n_windows = rx.histogram.n_bins / width
+    k_t = threshold_counts(mu, n_windows, false_alarm_probability(scene.timing.tnr))
+    return _predicted(scene, echo, rx, k_t)[0]
+
+
+def _predicted(scene: Scene, echo: EchoStage, rx: GmResponse, k_t):
+    """(n,) detection probability and range sigma from the expected counts: the peak window's
+    counts are Binomial(N, p) with p the per-pulse chance of an avalanche in it (signal or
+    background), P_d = P(counts >= k_T); sigma: the centroid of S signal counts of a pulse of
+    variance 2 s^2 (Gamma(2, s)) with jitter and bins, (c/2) sqrt(2 s^2 + sj^2 + b^2/12 / S)."""
+    gm = scene.gm
+    s_counts, b_counts = _expected_window_counts(scene, echo, rx.signal_pe, rx.rate_hz[echo.pixel])
+    p = np.clip((s_counts + b_counts) / gm.pulses, 0.0, 1.0)
+    p_d = special.bdtrc(k_t - 1.0, gm.pulses, p)
+    p_d = np.where(k_t <= 0, 1.0, p_d)
+    s = echo.shape.tau_s / echo.shape.a
+    single_s = np.sqrt(2.0 * s * s + gm.jitter_s**2 + gm.bin_s**2 / 12.0)
+    with np.errstate(divide="ignore"):
+        sigma_m = np.where(s_counts > 0, 0.5 * C * single_s / np.sqrt(s_counts), np.inf)
+    return p_d, sigma_m
+
+
+def _threshold_power_w(scene, echo, k_t: float, bg_per_bin, width: int) -> float:
+    """The band-limited peak power of a single-surface echo whose expected peak-window counts
+    over the frame reach ``k_t`` with the median background (inf if no echo can)."""
+    gm = scene.gm
+    need = (k_t - gm.pulses * float(np.median(bg_per_bin)) * width) / gm.pulses
+    if need >= 1.0:
+        return float("inf")
+    if need <= 0:
+        return 0.0
+    f = window_fraction(scene, echo)
+    signal_pe = -np.log1p(-need) / f
+    energy_j = signal_pe * photon_energy_j(scene.laser.wavelength_m) / gm.pde
+    return float(energy_j * echo.shape.peak_w_per_j)
+
+
+def _first_photon(scene, rx: GmResponse, lo_bin, hi_bin, lit_of, s_scale):
+    """Each pixel's first avalanche of pulse 0 as a range (c/2 (t - 2 s)), and whether it fell
+    in the echo's window."""
+    n_pixels = scene.detector.pixels**2
+    e = rx.events
+    first = e.pulse == 0
+    pix, b = e.pixel[first].astype(np.int64), e.bin[first].astype(np.int64)
+    # events are sorted by pixel then bin: the first of each pixel is its earliest
+    new = np.r_[True, pix[1:] != pix[:-1]] if len(pix) else np.zeros(0, bool)
+    pix, b = pix[new], b[new]
+    t_s = rx.gate_start_s + (b + 0.5) * scene.gm.bin_s
+    range_m = np.full(n_pixels, np.nan)
+    range_m[pix] = 0.5 * C * (t_s - 2.0 * s_scale)
+    is_echo = np.zeros(n_pixels, dtype=bool)
+    li = lit_of[pix]
+    lit = li >= 0
+    is_echo[pix[lit]] = (b[lit] >= lo_bin[li[lit]]) & (b[lit] <= hi_bin[li[lit]])
+    return range_m, is_echo
+
+
+def first_photon_cloud(result):
+    """The single-pulse first-photon cloud of a ``gm_apd`` result: one point per pixel that
+    fired in the frame's first pulse, at its first avalanche's range (``is_outlier`` where it
+    was not the echo's), with the cloud's attributes."""
+    from ..pointcloud import assemble_cloud  # noqa: PLC0415
+
+    d, e, rx = result.detection, result.echo, result.receiver
+    if not isinstance(d, GmDetection):
+        raise ValueError("first_photon_cloud needs a result of receiver.kind = 'gm_apd'")
+    n = result.pixels**2
+    fired = np.flatnonzero(np.isfinite(d.first_photon_range_m))
+    lit_of = np.full(n, -1, dtype=np.int64)
+    lit_of[e.pixel] = np.arange(len(e.pixel))
+    echo_pix = fired[d.first_photon_is_echo[fired]]
+    noise_pix = fired[~d.first_photon_is_echo[fired]]
+    li = lit_of[echo_pix]
+    return assemble_cloud(
+        result.rays.pixel_directions,
+        result.pixels,
+        echo_pix,
+        d.first_photon_range_m[echo_pix],
+        rx.peak_power_w[li],
+        rx.snr[li],
+        e.material_id[li],
+        e.facet_id[li],
+        noise_pix,
+        d.first_photon_range_m[noise_pix],
+    )
+
+
+def _detection_reads(s: Scene) -> tuple:
+    return (s.timing.tnr, s.gm.coates)
+
+
+RECEIVER = register(
+    Receiver(
+        kind="gm_apd",
+        doc="Geiger-mode single-photon APD array: photon-counting histograms of gm.pulses pulses",
+        response_reads=_response_reads,
+        respond=respond,
+        detection_reads=_detection_reads,
+        detect=detect,
+    )
+)

@@ -1,8 +1,9 @@
 """The app's UI state: one typed dataclass in display units, the control ranges, and the
 sanitiser that turns whatever arrives from the page (or the websocket) into valid controls.
 
-Display units differ from the scene's SI units in two places: the pulse energy is shown in mJ
-(``pulse_energy_mj``) and the filter width in nm (``filter_width_nm``); every other name matches
+Display units differ from the scene's SI units in three places: the pulse energy is shown in mJ
+(``pulse_energy_mj``), the filter width and the Geiger-mode dead time in nm and ns
+(``filter_width_nm``, ``gm_dead_time_ns``); every other name matches
 the scene's quick parameters (``pitch_deg``, ``azimuth_deg``, ``distance_m``, ``pixels``, ``tnr``,
 ``seed``) or its keys with the section's dot as an underscore (``sun_azimuth_deg``).
 """
@@ -19,6 +20,7 @@ import simcore
 COLOR_BY = ("range", "snr", "outlier")
 IMAGE_KINDS = ("range", "peak_power", "background")
 SUN_MODES = ("none", "manual", "orbit")  # sun.mode: the paper's dark sky, given, from the orbit
+RECEIVER_KINDS = ("lm_apd", "gm_apd")  # receiver.kind: linear-mode or Geiger-mode array
 SUBRAY_CHOICES = (1, 4, 16, 64)
 # fidelity presets of the core, plus "custom": the scene's fidelity with ``subrays`` sub-rays
 PRESET_CHOICES = (*simcore.PRESETS, "custom")
@@ -58,6 +60,10 @@ SPECS: dict[str, ControlSpec] = {
     "sun_azimuth_deg": ControlSpec("Sun azimuth", "deg", -180.0, 180.0, 1.0),
     "sun_elevation_deg": ControlSpec("Sun elevation", "deg", -90.0, 90.0, 1.0),
     "filter_width_nm": ControlSpec("Filter width", "nm", 0.1, 100.0, 0.1, log_slider=True),
+    "gm_pde": ControlSpec("Photon detection efficiency", "", 0.01, 1.0, 0.01),
+    "gm_dark_count_rate_hz": ControlSpec("Dark count rate", "Hz", 1.0, 1e8, 1.0, log_slider=True),
+    "gm_dead_time_ns": ControlSpec("Dead time", "ns", 1.0, 1e5, 1.0, log_slider=True),
+    "gm_pulses": ControlSpec("Pulses per frame", "", 1, 1000, 1, integer=True),
 }
 
 
@@ -82,6 +88,11 @@ class Controls:
     sun_azimuth_deg: float = 0.0
     sun_elevation_deg: float = 30.0
     filter_width_nm: float = 1.0
+    receiver_kind: str = "lm_apd"
+    gm_pde: float = 0.3
+    gm_dark_count_rate_hz: float = 1e4
+    gm_dead_time_ns: float = 1000.0
+    gm_pulses: int = 100
 
     def as_state(self) -> dict[str, Any]:
         """The trame state entries of these controls."""
@@ -117,6 +128,11 @@ def controls_from_scene(
         "sun_azimuth_deg": scene.sun.azimuth_deg,
         "sun_elevation_deg": scene.sun.elevation_deg,
         "filter_width_nm": scene.receive.filter_width_m * 1e9,
+        "receiver_kind": scene.receiver.kind,
+        "gm_pde": scene.gm.pde,
+        "gm_dark_count_rate_hz": scene.gm.dark_count_rate_hz,
+        "gm_dead_time_ns": scene.gm.dead_time_s * 1e9,
+        "gm_pulses": scene.gm.pulses,
     }
     return sanitize_controls(raw, Controls(materials=dict(part_materials)))
 
@@ -216,6 +232,7 @@ def sanitize_controls(raw: dict[str, Any], previous: Controls) -> tuple[Controls
         ("color_by", "Colour points by", COLOR_BY),
         ("image_kind", "Array image", IMAGE_KINDS),
         ("sun_mode", "Sun", SUN_MODES),
+        ("receiver_kind", "Receiver", RECEIVER_KINDS),
     )
     for key, label, options in choices:
         old = getattr(previous, key)

@@ -4,7 +4,8 @@ controls, a child of the app's logic.
 The query uses the names of ``lmapd simulate --set`` in SI units (``pitch_deg``, ``azimuth_deg``,
 ``distance_m``, ``pixels``, ``pulse_energy_j``, ``tnr``, ``seed``, ``preset`` or
 ``fidelity.subrays``, ``target.materials.PART``, ``sun.mode``, ``sun.azimuth_deg``,
-``sun.elevation_deg``, ``receive.filter_width_m``), so a link and a command line read alike:
+``sun.elevation_deg``, ``receive.filter_width_m``, ``receiver.kind`` and the ``gm.*`` keys), so
+a link and a command line read alike:
 
     http://127.0.0.1:8080/?token=...&pitch_deg=30&pixels=128&tnr=4
 
@@ -31,9 +32,14 @@ LINK_NAMES = {key: (key, 1.0) for key in SPECS} | {
     "sun_azimuth_deg": ("sun.azimuth_deg", 1.0),
     "sun_elevation_deg": ("sun.elevation_deg", 1.0),
     "filter_width_nm": ("receive.filter_width_m", 1e-9),
+    "gm_pde": ("gm.pde", 1.0),
+    "gm_dark_count_rate_hz": ("gm.dark_count_rate_hz", 1.0),
+    "gm_dead_time_ns": ("gm.dead_time_s", 1e-9),
+    "gm_pulses": ("gm.pulses", 1.0),
 }
 CONTROL_OF = {name: (key, factor) for key, (name, factor) in LINK_NAMES.items()}
-CHOICES = {"preset": "preset", "sun.mode": "sun_mode"}  # link name -> control
+# link name -> control
+CHOICES = {"preset": "preset", "sun.mode": "sun_mode", "receiver.kind": "receiver_kind"}
 IGNORED = ("token",)  # the page's access token rides in the same query
 
 
@@ -45,6 +51,7 @@ def link_settings(controls: Controls, initial: Controls) -> dict[str, str]:
         value = getattr(controls, key)
         settings[name] = _text(value * factor if factor != 1.0 else value)
     settings["sun.mode"] = controls.sun_mode
+    settings["receiver.kind"] = controls.receiver_kind
     if controls.preset == "custom":
         settings["fidelity.subrays"] = str(controls.subrays)
     else:

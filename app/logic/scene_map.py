@@ -23,6 +23,11 @@ def scene_overrides(controls: Controls) -> dict[str, object]:
         "sun.azimuth_deg": float(controls.sun_azimuth_deg),
         "sun.elevation_deg": float(controls.sun_elevation_deg),
         "receive.filter_width_m": float(controls.filter_width_nm) * 1e-9,
+        "receiver.kind": controls.receiver_kind,
+        "gm.pde": float(controls.gm_pde),
+        "gm.dark_count_rate_hz": float(controls.gm_dark_count_rate_hz),
+        "gm.dead_time_s": float(controls.gm_dead_time_ns) * 1e-9,
+        "gm.pulses": int(controls.gm_pulses),
     }
 
 

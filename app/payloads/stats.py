@@ -37,7 +37,24 @@ def stats_rows(summary: dict) -> list[dict]:
             "value": "–" if sigma is None else f"{sigma * 100:.3g} cm",
         },
         *_background_rows(summary),
+        *_receiver_rows(summary),
     ]
+
+
+def _receiver_rows(summary: dict) -> list[dict]:
+    """The receiver, and for a Geiger-mode array its frame's photon figures."""
+    if summary.get("receiver_kind", "lm_apd") != "gm_apd":
+        return [{"label": "Receiver", "value": "linear-mode APD array"}]
+    figures = summary.get("noise_figures") or {}
+    pulses = ((summary.get("scene") or {}).get("gm") or {}).get("pulses")
+    rows = [{"label": "Receiver", "value": f"Geiger-mode array, {pulses} pulses"}]
+    if "signal_pe_median" in figures:
+        rows.append(
+            {"label": "Echo photoelectrons / pulse", "value": f"{figures['signal_pe_median']:.3g}"}
+        )
+    if "events" in figures:
+        rows.append({"label": "Avalanches in the frame", "value": f"{figures['events']:,.0f}"})
+    return rows
 
 
 def _background_rows(summary: dict) -> list[dict]:

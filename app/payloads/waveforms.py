@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 import simcore
-from app.payloads import encode
+from app.payloads import encode, photons
 from app.payloads.charts import base_layout, note, vline
 from app.payloads.style import SELECTION_COLORS
 from simcore.constants import C as C_M_S
@@ -146,7 +146,10 @@ def _detected_time_ns(w: simcore.Waveform) -> float | None:
 def waveform_figure(result: simcore.Result, selection: list) -> dict:
     """The plotly figure of the selected pixels' echoes (several pixels overlaid): received power
     vs time since emission, the emitted pulse for reference, the half-maximum marks, the
-    threshold and the detected ranges."""
+    threshold and the detected ranges. A Geiger-mode frame gets the photon-count histograms
+    instead (app.payloads.photons)."""
+    if result.scene.receiver.kind == "gm_apd":
+        return photons.photon_figure(result, selection)
     waves = [result.waveform(int(r), int(c)) for r, c in selection]
     peak = max([float(np.max(w.power_w)) for w in waves if len(w.power_w)] + [0.0])
     threshold_w = waves[0].threshold_w if waves else float("nan")

@@ -274,6 +274,26 @@ def sunlight() -> None:
         )
 
 
+def receiver_choice() -> None:
+    """The receiver: the paper's linear-mode APD array or a Geiger-mode (single-photon) array
+    with its own parameters; the chart then shows photon-count histograms."""
+    labelled_toggle(
+        "Receiver",
+        "receiver_kind",
+        [("Linear mode", "lm_apd", "receiver-lm"), ("Geiger mode", "gm_apd", "receiver-gm")],
+        div_classes="control control-receiver_kind",
+    )
+    with html.Div(v_show="receiver_kind === 'gm_apd'", classes="gm-controls"):
+        for key in ("gm_pde", "gm_dark_count_rate_hz", "gm_dead_time_ns", "gm_pulses"):
+            slider(key)
+        html.Div(
+            "Each pixel counts single photons over the pulses (dead time re-armed at each gate); "
+            "click a pixel to see its histogram against the counts expected without dead time. "
+            "TNR sets the count threshold's false-alarm rate.",
+            classes="text-caption hint",
+        )
+
+
 def section(title: str) -> None:
     html.Div(title, classes="section-title text-overline")
 
@@ -301,6 +321,8 @@ def drawer_content() -> None:
             slider(key)
         fidelity_choice()
         seed_field()
+        section("Receiver")
+        receiver_choice()
         section("Sunlight (background light)")
         sunlight()
         materials_panel()

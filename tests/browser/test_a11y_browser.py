@@ -62,7 +62,14 @@ def test_every_control_has_an_accessible_name_in_both_modes(page, app_url):
     wait_first_frame(page)
     wait_settled(page)
     open_every_panel(page)
+    page.locator(".sun-manual").click()  # the Sun's sliders and the filter
+    page.locator(".receiver-gm").click()  # the Geiger-mode parameters
+    page.wait_for_timeout(400)
     single = controls_in_tree(page)
+    assert {"Sun azimuth", "Dead time"} <= {c["name"] for c in single if c["role"] == "slider"}
+    page.locator(".receiver-lm").click()
+    page.locator(".sun-none").click()
+    wait_settled(page)
     page.locator(".mode-flyaround").click()
     page.wait_for_timeout(400)
     flying = controls_in_tree(page)

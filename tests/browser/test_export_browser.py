@@ -5,7 +5,7 @@ takes)."""
 from __future__ import annotations
 
 import pytest
-from support.launch import wait_first_frame, wait_settled
+from support.launch import JS_STATE, wait_first_frame, wait_settled
 
 import simcore
 from simcore import io as simcore_io
@@ -33,4 +33,5 @@ def test_every_download_reads_back(page, app_url, tmp_path):
     header = next(ln for ln in csv_path.read_text().splitlines() if not ln.startswith("#"))
     assert header == "row,col,time_s,power_w,filtered_w,threshold_w,range_m,detected"
     scene = simcore.load_scene(str(download(page, "export-toml", tmp_path)))
-    assert scene.detector.pixels == 256 and scene.pose.distance_m == 500
+    shown = {k: page.evaluate(JS_STATE, k) for k in ("pixels", "distance_m", "tnr")}
+    assert (scene.detector.pixels, scene.pose.distance_m, scene.timing.tnr) == tuple(shown.values())

@@ -1,0 +1,89 @@
+"""The Geiger-mode receiver in the app: the switch and its parameters reach the scene, the chart
+shows the clicked pixel's photon histogram against the expected counts, the stats say which
+receiver ran."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from support.app_helpers import change, settle
+
+import simcore
+from app.engine import Engine
+from app.main import LmapdApp
+
+
+@pytest.fixture(scope="module")
+def app():
+    scene = simcore.with_overrides(simcore.load_scene(), {"pixels": 48, "fidelity.subrays": 1})
+    lmapd = LmapdApp(scene, engine=Engine(scene), flow_control=False, debounce_s=0.0)
+    lmapd.state.ready()
+    settle(lmapd)
+    yield lmapd
+    lmapd.logic.runner.close()
+
+
+def stat(app, label: str) -> str:
+    return next(r["value"] for r in app.state.stats if r["label"] == label)
+
+
+def test_the_linear_mode_array_is_the_default_and_says_so(app):
+    assert stat(app, "Receiver") == "linear-mode APD array"
+    assert all(t["type"] == "scatter" for t in app.state.waveforms["data"])
+
+
+def test_the_geiger_mode_switch_and_its_parameters_reach_the_scene(app):
+    change(
+        app,
+        receiver_kind="gm_apd",
+        gm_pde=0.5,
+        gm_dark_count_rate_hz=2e4,
+        gm_dead_time_ns=50.0,
+        gm_pulses=20,
+        pulse_energy_mj=0.001,
+    )
+    scene = app.logic.last_frame.result.scene
+    assert scene.receiver.kind == "gm_apd" and scene.gm.pde == 0.5 and scene.gm.pulses == 20
+    assert scene.gm.dead_time_s == pytest.approx(50e-9) and scene.gm.dark_count_rate_hz == 2e4
+    assert stat(app, "Receiver") == "Geiger-mode array, 20 pulses"
+    assert float(stat(app, "Echo photoelectrons / pulse")) > 0
+    query = app.state.share_query
+    assert "receiver.kind=gm_apd" in query and "gm.pulses=20" in query
+
+
+def test_the_chart_shows_the_pixels_histogram_and_the_expected_counts(app):
+    # about one echo photoelectron per pulse: 10 uJ, PDE 0.01, 5 km
+    change(
+        app,
+        receiver_kind="gm_apd",
+        gm_pulses=50,
+        gm_pde=0.01,
+        pulse_energy_mj=0.01,
+        distance_m=5000,
+    )
+    result = app.logic.last_frame.result
+    brightest = int(result.echo.pixel[np.argmax(result.receiver.signal_pe)])
+    row, col = divmod(brightest, result.pixels)
+    app.logic.on_pixel_click(row, col)
+    bars, expected = app.state.waveforms["data"][:2]
+    assert bars["type"] == "bar" and expected["name"].endswith("expected (no dead time, no jitter)")
+    bins, counts = result.receiver.histogram.pixel_counts(row * result.pixels + col)
+    elsewhere = (
+        int(bars["name"].split(", ")[-1].split()[0].replace(",", ""))
+        if "more" in bars["name"]
+        else 0
+    )
+    assert sum(bars["y"]) + elsewhere == counts.sum() > 0
+    # a weak echo: the counts drawn come near the expected ones (one per pulse at most, the
+    # dead time outlasting the gate: 1 - exp(-N) of N expected)
+    n_expected = sum(expected["y"]) / 50
+    assert 0.2 < n_expected < 5
+    want = 50 * (1 - np.exp(-n_expected))
+    assert abs(sum(bars["y"]) - want) < 4 * np.sqrt(want) + 1
+    assert np.all(np.diff(bars["x"]) > 0)
+
+
+def test_back_to_linear_mode(app):
+    change(app, receiver_kind="lm_apd", pulse_energy_mj=5.0, distance_m=500)
+    assert app.logic.last_frame.result.scene.receiver.kind == "lm_apd"
+    assert stat(app, "Receiver") == "linear-mode APD array"

@@ -97,6 +97,7 @@ def client_keys() -> dict[str, security.Screen]:
             "main_drawer": security.boolean,
             "upload_file": security.file_upload,
             "upload_scale": security.scalar,
+            "target_choice": security.scalar,
             "upload_error": security.cleared,
             "error_message": security.cleared,
             "input_message": security.cleared,

@@ -16,6 +16,8 @@ import dataclasses
 import time
 from typing import Any
 
+import numpy as np
+
 import simcore
 from app.engine import Engine, Frame, Request
 from app.logic import exports
@@ -29,6 +31,7 @@ from app.logic.upload import LoadedTarget, TargetUploads
 from app.payloads import scene3d, stats, style
 from app.runner import Outcome, Runner
 from app.state import STATE_KEYS, Controls, controls_from_scene
+from simcore.target import fov_fill_distance_m, parts_table
 
 
 def _running_loop() -> asyncio.AbstractEventLoop | None:
@@ -91,6 +94,7 @@ class AppLogic:
         server.trigger("frame_shown")(self.on_frame_shown)
         server.trigger("reset_controls")(self.reset_controls)
         server.trigger("open_link")(self.open_link)
+        server.trigger("fit_field_of_view")(self.fit_field_of_view)
         server.trigger("export_cloud")(self.export_cloud)
         server.trigger("export_waveforms")(self.export_waveforms)
         server.trigger("export_scene")(self.export_scene)
@@ -117,6 +121,7 @@ class AppLogic:
                 "target_name": model.name,
                 "credit": model.credit or "",
                 "part_names": list(model.part_names),
+                "part_info": part_info(model),
                 "material_items": [
                     {"title": simcore.MATERIALS[n].label or n, "value": n}
                     for n in simcore.MATERIAL_NAMES
@@ -193,6 +198,7 @@ class AppLogic:
                     "target_name": name,
                     "credit": model.credit or "",
                     "part_names": list(model.part_names),
+                    "part_info": part_info(model),
                     "materials": dict(initial_controls.materials),
                     "target_points": geometry["points"],
                     "target_polys": geometry["polys"],
@@ -201,6 +207,15 @@ class AppLogic:
                 }
             )
         self.on_controls_change()
+
+    def fit_field_of_view(self, *_: Any, **__: Any) -> None:
+        """Set the distance at which the target just fills the field of view at any attitude
+        (its bounding sphere about the mesh centre subtends the full field of view)."""
+        mesh = self.engine.model.mesh
+        radius_m = float(np.max(np.linalg.norm(mesh.vertices - mesh.bounds.mean(axis=0), axis=1)))
+        distance_m = fov_fill_distance_m(radius_m, self.base_scene.receive.fov_rad)
+        with self.state:
+            self.state.distance_m = round(distance_m, 1)  # clamped to the slider's range
 
     def open_link(self, settings: Any = None, *_: Any, **__: Any) -> None:
         """The page was opened with a shared link: its settings replace the controls (from the
@@ -351,3 +366,13 @@ class AppLogic:
     ) -> None:
         """Click on the array image: select pixel (row, col); with shift, add/remove it."""
         self.selection.click(self.last_frame, row, col, add)
+
+
+def part_info(model: simcore.TargetModel) -> dict[str, str]:
+    """What the materials panel says of each part: its share of the area, its triangles, and
+    whether the lidar sees through it (glTF opacity)."""
+    info = {}
+    for row in parts_table(model):
+        text = f"{100 * row['area_share']:.1f} % of the area, {row['triangles']:,} triangles"
+        info[row["name"]] = text + (", transparent" if row["transparent"] else "")
+    return info

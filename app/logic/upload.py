@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import atexit
+import base64
 import dataclasses
 import io
 import logging
@@ -35,7 +36,13 @@ import simcore
 from app.engine import Engine
 from app.logic.scene_map import resolved_materials
 from app.state import Controls, echo
-from simcore.target import TargetError, load_mesh_file
+from simcore.target import (
+    TARGETS_DIR,
+    TargetError,
+    builtin_settings,
+    builtin_targets,
+    load_mesh_file,
+)
 
 log = logging.getLogger(__name__)
 
@@ -85,6 +92,16 @@ def upload_content(value: Any) -> tuple[bytes, str]:
     if not content:
         raise UploadError("the file is empty")
     return content, suffix
+
+
+def upload_name(value: Any) -> str:
+    """The client's file name, quoted short, for messages only (never used as a path)."""
+    if isinstance(value, list | tuple) and len(value) == 1:
+        value = value[0]
+    name = value.get("name") if isinstance(value, dict) else None
+    if not isinstance(name, str) or not name:
+        return "the file"
+    return echo(name.replace("\\", "/").rsplit("/", 1)[-1])  # a Windows path too
 
 
 def _too_big(size: float) -> str:
@@ -187,6 +204,39 @@ def target_scene(base: simcore.Scene, path: Path, scale: float) -> simcore.Scene
     )
 
 
+def load_builtin(base: simcore.Scene, name: str) -> LoadedTarget:
+    """Built-in target ``name`` (the catalogue's spacecraft or a calibration shape) at its own
+    size and materials, in the app's base scene."""
+    scene = simcore.with_overrides(
+        base,
+        {
+            "target.mesh": name,
+            "target.scale_m_per_unit": 0.0,
+            "target.size_m": 0.0,
+            "target.material_map": "",
+            "target.materials": {},
+        },
+    )
+    engine = Engine(scene)
+    return LoadedTarget(scene, engine, None, len(engine.model.mesh.faces))
+
+
+def catalogue_items() -> list[dict]:
+    """The drop-down's built-in targets: name, size and a thumbnail where the target has one."""
+    items = []
+    for name in builtin_targets():
+        settings = builtin_settings(name)
+        size = settings.get("longest_extent_m")
+        title = settings.get("name", name).split(" (")[0]
+        item = {"title": f"{title} ({size:g} m)" if size else title, "value": name}
+        thumbnail = TARGETS_DIR / name / "thumbnail.png"
+        if thumbnail.is_file() and thumbnail.stat().st_size < 256 * 1024:
+            data = base64.b64encode(thumbnail.read_bytes()).decode("ascii")
+            item["prependAvatar"] = f"data:image/png;base64,{data}"
+        items.append(item)
+    return items
+
+
 def load_uploaded(base: simcore.Scene, path: Path, scale: float) -> LoadedTarget:
     """Load our own copy of an upload as the target of ``base`` (in a worker thread).
     Raises UploadError with the core's message for meshes it refuses."""
@@ -226,6 +276,7 @@ class TargetUploads:
         self.current = self.builtin
         self.files = PrivateDir()
         self._ticket = 0
+        self._file_name = "the file"  # the current upload's name, for messages
         self._raw: bytes | None = None  # the current upload's glb, to re-load with a new scale
         self.state.update(
             {
@@ -237,9 +288,13 @@ class TargetUploads:
                 "target_is_upload": False,
                 "upload_max_mib": MAX_UPLOAD_BYTES >> 20,
                 "upload_max_faces": MAX_UPLOAD_FACES,
+                "upload_input_key": 0,  # a new value re-creates the file input (empty)
+                "target_items": catalogue_items(),
+                "target_choice": builtin.scene.target.mesh,
             }
         )
         self.state.change("upload_file")(self.on_upload)
+        self.state.change("target_choice")(self.on_target_choice)
         self.state.change("upload_scale")(self.on_scale)
         server.trigger("use_builtin_target")(self.use_builtin)
         server.controller.on_server_exited.add(lambda **_: self.files.cleanup())
@@ -248,12 +303,16 @@ class TargetUploads:
     def on_upload(self, upload_file: Any = None, **_: Any) -> None:
         if not upload_file:  # None, or an empty selection (the input was cleared)
             return
-        self.state.upload_file = None  # drop the bytes from the shared state at once
+        # drop the bytes from the shared state at once, and empty the input: the same file can
+        # be picked again (after a refusal, or with another scale)
+        self.state.upload_file = None
+        self.state.upload_input_key = int(self.state.upload_input_key or 0) + 1
+        self._file_name = name = upload_name(upload_file)
         try:
             content, suffix = upload_content(upload_file)
             scale = scale_value(self.state.upload_scale)
         except UploadError as exc:
-            self._fail(str(exc))
+            self._fail(f"{name}: {exc}")
             return
 
         def work() -> LoadedTarget:
@@ -280,6 +339,21 @@ class TargetUploads:
             return
         self._start(lambda: load_uploaded(self.builtin.scene, current.path, scale))
 
+    def on_target_choice(self, target_choice: Any = None, **_: Any) -> None:
+        """A built-in target picked from the drop-down: load it off the event loop."""
+        if target_choice is None or (
+            target_choice == self.current.scene.target.mesh and self.current.path is None
+        ):
+            return  # an upload is shown (no choice), or the choice is the target shown
+        if target_choice == self.builtin.scene.target.mesh:
+            self.use_builtin()
+            return
+        if not isinstance(target_choice, str) or target_choice not in builtin_targets():
+            self.state.upload_error = f"No built-in target {echo(target_choice)}"
+            return
+        self._file_name = target_choice
+        self._start(lambda: load_builtin(self.builtin.scene, target_choice))
+
     def use_builtin(self, *_: Any, **__: Any) -> None:
         self._ticket += 1  # any upload still loading is dropped
         self._switch(self.builtin, "")
@@ -304,13 +378,14 @@ class TargetUploads:
         with self.state:
             self.state.upload_busy = False
             if isinstance(outcome, str):
-                self._fail(outcome)
+                self._fail(f"{self._file_name}: {outcome}")
                 return
             model = outcome.engine.model
             extent = float(model.mesh.extents.max())
+            what = self._file_name if outcome.path is not None else model.name
             text = (
-                f"Loaded {outcome.n_faces:,} triangles in {len(model.part_names)} part(s), "
-                f"{extent:.3g} m long"
+                f"Loaded {what}: {outcome.n_faces:,} triangles in {len(model.part_names)} "
+                f"part(s), {extent:.3g} m long"
             )
             self._switch(outcome, text)
 
@@ -332,7 +407,11 @@ class TargetUploads:
         materials = resolved_materials(model, target.scene)
         with self.state:
             self.state.update(
-                {"upload_message": message, "target_is_upload": target.path is not None}
+                {
+                    "upload_message": message,
+                    "target_is_upload": target.path is not None,
+                    "target_choice": None if target.path else target.scene.target.mesh,
+                }
             )
         self.use_target(
             target.scene,

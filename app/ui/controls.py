@@ -13,7 +13,7 @@ from app.logic.scene_map import preset_text
 from app.state import PRESET_CHOICES, SPECS, SUBRAY_CHOICES, ControlSpec
 from app.ui import flyaround
 from app.ui.upload import upload_panel
-from app.ui.widgets import a11y_attributes, labelled_toggle
+from app.ui.widgets import a11y_attributes, html_attributes, labelled_toggle
 
 SHARE_URL = "trame.utils.lmapdLink ? trame.utils.lmapdLink.url(share_query) : ''"
 SLOW_RAYS = 2e6  # rays per flash above which the page warns that updates take seconds
@@ -141,6 +141,33 @@ def seed_field() -> None:
         )
 
 
+def target_choice() -> None:
+    """The built-in targets (NASA spacecraft with their thumbnails, calibration shapes) and the
+    distance at which the shown target fills the field of view."""
+    with html.Div(classes="control control-target d-flex align-center ga-1"):
+        v3.VSelect(
+            label="Target",
+            model_value=("target_choice",),
+            update_modelValue="target_choice = $event",
+            items=("target_items",),
+            placeholder="uploaded mesh",
+            density="compact",
+            variant="outlined",
+            hide_details=True,
+            disabled=("upload_busy",),
+            classes="target-select",
+        )
+        v3.VBtn(
+            icon="mdi-fit-to-screen-outline",
+            size="small",
+            variant="text",
+            title="Fit the field of view: the distance at which the target just fills it",
+            click="trigger('fit_field_of_view')",
+            classes="fit-fov",
+            **html_attributes(aria_label="Fit the field of view"),
+        )
+
+
 def materials_panel() -> None:
     """One drop-down per target part over the material library."""
     with v3.VExpansionPanels(variant="accordion", classes="mt-2"):
@@ -151,12 +178,13 @@ def materials_panel() -> None:
                     v_for="part in part_names",
                     key="part",
                     label=("part",),
+                    hint=("part_info[part] || ''",),
+                    persistent_hint=True,
                     model_value=("materials[part]",),
                     update_modelValue="materials = {...materials, [part]: $event}",
                     items=("material_items",),
                     density="compact",
                     variant="outlined",
-                    hide_details=True,
                     classes="mb-2 material-select",
                 )
 
@@ -310,6 +338,7 @@ def drawer_content() -> None:
             click="trigger('reset_controls')",
             classes="reset-button mb-2",
         )
+        target_choice()
         flyaround.mode_switch()
         with html.Div(v_show="mode !== 'flyaround'", classes="single-pose"):
             section("Pose of the target")

@@ -25,7 +25,9 @@ def upload_panel() -> None:
             v3.VExpansionPanelTitle("Target mesh (upload your own)", classes="text-body-2")
             with v3.VExpansionPanelText():
                 v3.VFileInput(
-                    label="glTF, OBJ, STL or PLY mesh",
+                    key=("upload_input_key",),  # re-created empty after each pick: the same
+                    __properties=["key"],  # file can be picked again
+                    label="glTF (Draco too), OBJ, STL or PLY mesh",
                     accept=",".join(ALLOWED_SUFFIXES),
                     update_modelValue=ON_FILE,
                     disabled=("upload_busy",),

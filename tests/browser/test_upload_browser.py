@@ -34,7 +34,7 @@ def test_a_mesh_uploaded_from_the_page_becomes_the_target(page, app_url, tmp_pat
 
     file_input.set_input_files(str(box))
     page.wait_for_function("() => window.trame.state.get('target_is_upload') === true")
-    page.locator(".upload-message").filter(has_text="Loaded 12 triangles").wait_for()
+    page.locator(".upload-message").filter(has_text="Loaded 'box.stl': 12 triangles").wait_for()
     wait_settled(page)
     assert state(page, "n_points") > 0 and state(page, "error_message") == ""
     assert len(state(page, "part_names")) == 1
@@ -43,7 +43,7 @@ def test_a_mesh_uploaded_from_the_page_becomes_the_target(page, app_url, tmp_pat
     file_input.set_input_files(str(bad))
     error = page.locator(".upload-error")
     error.wait_for()
-    assert "Upload refused: cannot read the .glb file" in error.inner_text()
+    assert "Upload refused: 'broken.glb': cannot read the .glb file" in error.inner_text()
     assert "Traceback" not in page.content()
 
     huge = tmp_path / "huge.stl"

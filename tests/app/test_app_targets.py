@@ -1,0 +1,100 @@
+"""Targets in the app: a built-in spacecraft picked from the drop-down becomes the target (off
+the event loop), the parts panel says each part's share of the area, "fit the field of view"
+sets the distance at which the target fills it, an upload's messages name its file."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import trimesh
+from support.app_helpers import settle
+
+import simcore
+from app.engine import Engine
+from app.main import LmapdApp
+from simcore.target import builtin_targets
+
+
+@pytest.fixture(scope="module")
+def app():
+    scene = simcore.with_overrides(simcore.load_scene(), {"pixels": 48, "fidelity.subrays": 1})
+    lmapd = LmapdApp(scene, engine=Engine(scene), flow_control=False, debounce_s=0.0)
+    lmapd.state.ready()
+    settle(lmapd)
+    yield lmapd
+    lmapd.logic.runner.close()
+    lmapd.uploads.files.cleanup()
+
+
+def box_stl() -> bytes:
+    return trimesh.creation.box(extents=(2.0, 1.0, 0.5)).export(file_type="stl")
+
+
+def pick(app, name):
+    with app.state:
+        app.state.target_choice = name
+    settle(app)
+
+
+def test_the_drop_down_lists_the_catalogue_with_sizes_and_thumbnails(app):
+    items = app.state.target_items
+    assert [i["value"] for i in items] == builtin_targets()
+    tdrs = next(i for i in items if i["value"] == "tdrs")
+    assert "m)" in tdrs["title"] and tdrs["prependAvatar"].startswith("data:image/png;base64,")
+    assert app.state.target_choice == "mro"
+
+
+def test_a_built_in_spacecraft_becomes_the_target_and_the_parts_say_their_share(app):
+    pick(app, "tess")
+    result = app.logic.last_frame.result
+    assert result.scene.target.mesh == "tess"
+    assert result.target.name.startswith("Transiting Exoplanet")
+    assert app.state.target_name.startswith("Transiting Exoplanet") and "NASA" in app.state.credit
+    shares = [float(app.state.part_info[p].split(" %")[0]) for p in app.state.part_names]
+    assert math.isclose(sum(shares), 100.0, abs_tol=0.1 * len(shares))
+    assert app.state.n_points > 0 and app.state.upload_error == ""
+    pick(app, "mro")
+    assert app.logic.last_frame.result.scene.target.mesh == "mro"
+
+
+def test_fit_the_field_of_view_sets_the_distance_where_the_target_fills_it(app):
+    app.logic.fit_field_of_view()
+    settle(app)
+    mesh = app.engine.model.mesh
+    result = app.logic.last_frame.result
+    d = result.scene.pose.distance_m
+    half_fov = result.scene.receive.fov_rad / 2
+    radius = max(((mesh.vertices - mesh.bounds.mean(axis=0)) ** 2).sum(axis=1)) ** 0.5
+    assert math.isclose(math.sin(half_fov) * d, radius, rel_tol=1e-3)  # 0.1 m rounding
+    with app.state:
+        app.state.distance_m = 500.0
+    settle(app)
+
+
+def test_an_unknown_choice_is_refused_with_a_message(app):
+    pick(app, "../../etc/passwd")
+    assert app.state.upload_error == "No built-in target '../../etc/passwd'"
+    assert app.logic.last_frame.result.scene.target.mesh == "mro"
+
+
+def test_an_uploads_messages_name_its_file_and_the_input_is_emptied_for_a_new_pick(app):
+    before = app.state.upload_input_key
+    with app.state:
+        app.state.upload_file = {
+            "name": "C:\\meshes\\tiny.stl",
+            "size": 10,
+            "content": b"solid x",
+        }
+    settle(app)
+    assert app.state.upload_error.startswith("Upload refused: 'tiny.stl': ")
+    assert app.state.upload_input_key == before + 1
+    data = box_stl()
+    with app.state:
+        app.state.upload_file = {"name": "box.stl", "size": len(data), "content": data}
+    settle(app)
+    assert app.state.upload_message.startswith("Loaded 'box.stl': 12 triangles")
+    assert app.state.target_choice is None  # an upload: no built-in target chosen
+    app.uploads.use_builtin()
+    settle(app)
+    assert app.state.target_choice == "mro"

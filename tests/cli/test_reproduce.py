@@ -35,6 +35,7 @@ ITEM_KEYS = {
     "resolution": {"point_counts", "fov_rule"},
     "flyaround": {"records", "frames", "distance_stats_m", "paper_period_s", "two_body_period_s"},
     "conventions": {"rows", "columns"},
+    "daylight": {"rows", "columns"},
 }
 COMMON_KEYS = {"item", "paper_figure", "figures", "scenes"}
 TABLE1 = {"ideal_diffuse", "ideal_specular", "solar_panel", "coating_1", "coating_2"}
@@ -74,7 +75,7 @@ def _png_size(path: Path) -> tuple[int, int]:
 def test_every_figure_is_written_as_a_real_png(runs):
     folder, report = runs[0]
     names = report["figures"]
-    assert len(names) == len(set(names)) == 9
+    assert len(names) == len(set(names)) == 10
     for name in names:
         width, height = _png_size(folder / name)
         assert width >= 600 and height >= 300, name
@@ -82,7 +83,7 @@ def test_every_figure_is_written_as_a_real_png(runs):
     assert on_disk == set(names)
 
 
-def test_the_report_holds_all_seven_items_with_their_numbers(report):
+def test_the_report_holds_all_eight_items_with_their_numbers(report):
     assert list(report["items"]) == list(ITEMS)
     for number, name in enumerate(ITEMS, start=1):
         item = report["items"][name]
@@ -182,3 +183,15 @@ def test_the_doc_shows_every_figure_of_the_run(report):
         _png_size(DOC.parent / "img" / "repro" / name)
     assert "lmapd reproduce --out" in text
     assert "NASA" in text
+
+
+def test_the_daylight_item_adds_background_by_day_and_a_wider_filter_more(report):
+    rows = {r["case"]: r for r in report["items"]["daylight"]["rows"]}
+    assert rows["night"]["background_power_w_median"] == 0
+    assert 0 < rows["day, 1 nm filter"]["background_power_w_median"]
+    ratio = (
+        rows["day, 10 nm filter"]["background_power_w_median"]
+        / rows["day, 1 nm filter"]["background_power_w_median"]
+    )
+    assert 5 < ratio < 15  # ten times the band, the solar spectrum nearly flat over it
+    assert abs(rows["day, 1 nm filter"]["sun_angle_deg"] - 30.0) < 1.0

@@ -12,12 +12,22 @@ from ...materials import MATERIAL_NAMES
 from ...reproduce import PAPER, git_commit, settings_for
 from .items_clouds import item_attitude, item_conventions, item_flyaround, item_resolution
 from .items_echo import item_brdf, item_detection, item_waveforms
+from .items_light import item_daylight
 from .run import ReproduceRun, total_steps
 
 __all__ = ["ITEMS", "REPORT_NAME", "run_reproduction"]
 
 REPORT_NAME = "report.json"
-ITEMS = ("brdf", "detection", "waveforms", "attitude", "resolution", "flyaround", "conventions")
+ITEMS = (
+    "brdf",
+    "detection",
+    "waveforms",
+    "attitude",
+    "resolution",
+    "flyaround",
+    "conventions",
+    "daylight",  # beyond the paper: background light
+)
 
 
 def run_reproduction(
@@ -55,6 +65,7 @@ def run_reproduction(
         "resolution": item_resolution,
         "flyaround": item_flyaround,
         "conventions": item_conventions,
+        "daylight": item_daylight,
     }
     start = time.perf_counter()
     with run.bar:

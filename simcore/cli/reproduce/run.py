@@ -72,4 +72,5 @@ def total_steps(s: ReproduceSettings) -> int:
         + 2  # flyaround
         + len(PAPER_FORMS)
         + 3  # conventions
+        + 4  # daylight: three cases and the figure
     )

@@ -3,8 +3,9 @@
 
 Writes docs/img/mc_agreement.png with three panels -- P_d vs TNR for several SNR (Eq. 27 curves,
 MC points with binomial error bars), false alarms per pixel per 1 km gate vs TNR (Rice, the
-paper's form, MC points with Poisson error bars) and range sigma vs SNR (Eq. 24 with Eq. 25 ours,
-the shot-aware CFD jitter, MC points) -- and prints the agreement figures.
+paper's form, MC points with Poisson error bars) and range sigma vs SNR (Eq. 24 with Eq. 25 per
+sample, the default: each CFD sample's own shot noise, and with the paper's equal-noise form; MC
+points) -- and prints the agreement figures.
 
     .venv/bin/python scripts/plot_mc_agreement.py [--out docs/img/mc_agreement.png] [--quick]
 """
@@ -173,14 +174,20 @@ def sigma_panel(ax, quick):
             for i in i_fine
         ]
     )
-    ax.loglog(snr_fine, 1e3 * eq24, lw=1.8, color="C0", label="Eq. 24 (Eq. 25 ours + Eq. 26)")
+    ax.loglog(
+        snr_fine,
+        1e3 * eq24,
+        "--",
+        lw=1.5,
+        color="C0",
+        label="Eq. 24, equal-noise Eq. 25 (paper form eq25_equal_noise)",
+    )
     ax.loglog(
         snr_fine,
         1e3 * aware,
-        "--",
-        lw=1.5,
+        lw=1.8,
         color="C3",
-        label="CFD jitter, shot noise in time (default rx)",
+        label="Eq. 24, per-sample Eq. 25 (ours, the default; default rx)",
     )
     ax.axhline(1e3 * sigma_t, color="0.5", lw=0.8, ls=":", label="Eq. 26 sigma_t (100 ps)")
     for name, color, label in (

@@ -26,6 +26,7 @@ def stats_rows(summary: dict) -> list[dict]:
         {"label": "Target points", "value": fmt(summary["n_target_points"], ",d")},
         {"label": "Outliers (false alarms)", "value": fmt(summary["n_outliers"], ",d")},
         {"label": "Dropped pixels (missed)", "value": fmt(summary["n_dropped"], ",d")},
+        {"label": "Unlit pixels (outside the beam)", "value": fmt(summary.get("n_unlit"), ",d")},
         {
             "label": "Pixels seeing the target",
             "value": f"{summary['n_hit_pixels']:,d} of {summary['n_pixels']:,d}",

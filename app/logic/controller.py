@@ -3,10 +3,10 @@
 The parent of one child per feature, which it calls (they never call it; where a child must ask
 for a new frame, the parent hands it a callback): the controls (``ControlPanel``: sanitised,
 corrections written back), the pixel selection (``PixelSelection``), the frame pacing
-(``FramePacer``: no more frames than the page draws), the fly-around (``FlyaroundLogic``) and the
-uploaded targets (``TargetUploads``). A valid scene goes to the runner, which computes in its
-worker thread; finished frames come back through the event loop and are applied only if they are
-still the newest generation.
+(``FramePacer``: no more frames than the page draws), the fly-around (``FlyaroundLogic``), the
+uploaded targets (``TargetUploads``) and the lessons (``LessonGuide``). A valid scene goes to the
+runner, which computes in its worker thread; finished frames come back through the event loop and
+are applied only if they are still the newest generation.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ from app.engine import Engine, Frame, Request
 from app.logic import exports
 from app.logic.controls import ControlPanel
 from app.logic.flyaround import FlyaroundLogic
+from app.logic.lessons import LessonGuide
 from app.logic.links import controls_from_link, link_query
 from app.logic.pacing import FramePacer
 from app.logic.scene_map import resolved_materials, scene_from_controls
@@ -90,6 +91,7 @@ class AppLogic:
             builtin_initial=initial_controls,
             use_target=self.use_target,
         )
+        self.lessons = LessonGuide(self.state)  # one-click scenes with a card (their own state)
         server.trigger("pixel_click")(self.on_pixel_click)
         server.trigger("frame_shown")(self.on_frame_shown)
         server.trigger("reset_controls")(self.reset_controls)
@@ -98,6 +100,8 @@ class AppLogic:
         server.trigger("export_cloud")(self.export_cloud)
         server.trigger("export_waveforms")(self.export_waveforms)
         server.trigger("export_scene")(self.export_scene)
+        server.trigger("open_lesson")(self.open_lesson)
+        server.trigger("leave_lesson")(self.lessons.leave)
         server.controller.on_server_exited.add(lambda **_: self.runner.close())
 
     @property
@@ -227,6 +231,28 @@ class AppLogic:
         )
         with self.state:
             self.state.update({**controls.as_state(), "input_message": "; ".join(messages)})
+
+    def open_lesson(self, key: Any = None, *_: Any, **__: Any) -> None:
+        """A lesson's button: its controls, mode and pixel selection in one flush, its card on
+        the page, then its frame (computed once even where nothing but the selection changed)."""
+        plan = self.lessons.plan(key, self.panel.initial)
+        if plan is None:
+            return
+        self.selection.array_pixels = plan.controls.pixels  # the selection is on its array
+        generation = self.runner.generation
+        with self.state:  # the change handlers submit the new scene, if it is one
+            self.state.update(
+                {
+                    **plan.controls.as_state(),
+                    **plan.flyaround,
+                    "selected_pixels": plan.selection,
+                    "input_message": "; ".join(plan.messages),
+                    "busy": True,  # with the card: the page waits for the lesson's frame
+                    **self.lessons.opened(plan, self.state.target_name),
+                }
+            )
+        if self.runner.generation == generation:  # the same scene: the selection's waveforms
+            self.on_controls_change()
 
     # -- downloads (the page's utils.download saves what these return) --------------------------
     def export_cloud(self, fmt: Any = "ply", *_: Any, **__: Any) -> Any:

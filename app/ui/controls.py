@@ -11,7 +11,7 @@ from trame.widgets import vuetify3 as v3
 import simcore
 from app.logic.scene_map import preset_text
 from app.state import PRESET_CHOICES, SPECS, SUBRAY_CHOICES, ControlSpec
-from app.ui import flyaround
+from app.ui import flyaround, lessons
 from app.ui.upload import upload_panel
 from app.ui.widgets import a11y_attributes, html_attributes, labelled_toggle
 
@@ -338,6 +338,7 @@ def drawer_content() -> None:
             click="trigger('reset_controls')",
             classes="reset-button mb-2",
         )
+        lessons.lessons_panel()
         target_choice()
         flyaround.mode_switch()
         with html.Div(v_show="mode !== 'flyaround'", classes="single-pose"):

@@ -7,7 +7,7 @@ from trame.ui.vuetify3 import VAppLayout
 from trame.widgets import client, html
 from trame.widgets import vuetify3 as v3
 
-from app.ui import controls, panels, views3d
+from app.ui import controls, lessons, panels, views3d
 from app.ui.widgets import html_attributes
 
 # After the page applied a frame, wait for it to be painted, then tell the server (frame pacing)
@@ -222,6 +222,7 @@ def messages() -> None:
 def views_grid() -> None:
     with v3.VContainer(fluid=True, classes="pa-2"):
         messages()
+        lessons.lesson_card()
         with v3.VRow(dense=True):
             with v3.VCol(cols=12, lg=6):
                 views3d.scene_card()

@@ -1,0 +1,84 @@
+"""The lessons on the page: a panel in the drawer with one button per lesson, and the open
+lesson's card above the views (what to look at, why, what to try, the section to read) with a
+"Leave lesson" button. The records and what opening one sets are app.logic.lessons'."""
+
+from __future__ import annotations
+
+from trame.widgets import client, html
+from trame.widgets import vuetify3 as v3
+
+from app.logic.lessons import LESSONS
+from app.ui.widgets import html_attributes
+
+CSS = """
+.lesson-button.v-btn { height: auto !important; min-height: 30px; padding: 4px 10px;
+  justify-content: flex-start; text-align: left; text-transform: none; letter-spacing: 0; }
+.lesson-button .v-btn__content { white-space: normal; line-height: 1.3; }
+.lesson-card { border-left: 4px solid #1565c0; }
+.lesson-card .lesson-text { font-size: 0.88rem; line-height: 1.45; margin-bottom: 4px; }
+.lesson-card .lesson-label { font-weight: 600; color: #0d47a1; }
+.lesson-card code { font-size: 0.8rem; }
+"""
+
+
+def lessons_panel() -> None:
+    """The drawer's "Lessons" panel: a button per lesson (``open_lesson`` with its key)."""
+    client.Style(CSS)
+    with v3.VExpansionPanels(variant="accordion", classes="mb-2 lessons-panel"):
+        with v3.VExpansionPanel():
+            v3.VExpansionPanelTitle(
+                "Lessons (one-click scenes)", classes="text-body-2 lessons-title"
+            )
+            with v3.VExpansionPanelText():
+                html.Div(
+                    "Each sets the scene and selects pixels to look at; a card above the views "
+                    "says what to see and why. Change anything, or leave the lesson, at any time.",
+                    classes="text-caption hint mb-1",
+                )
+                for lesson in LESSONS:
+                    v3.VBtn(
+                        lesson.title,
+                        block=True,
+                        size="small",
+                        variant=(f"lesson && lesson.key === '{lesson.key}' ? 'flat' : 'tonal'",),
+                        color="primary",
+                        click=f"trigger('open_lesson', ['{lesson.key}'])",
+                        classes=f"lesson-button lesson-{lesson.key} mb-1",
+                    )
+
+
+def lesson_card() -> None:
+    """The open lesson's card, above the views (nothing when no lesson is open)."""
+    with v3.VCard(
+        v_if="lesson",
+        classes="lesson-card mb-2",
+        elevation=1,
+        **html_attributes(role="region", aria_label="Lesson"),
+    ):
+        with v3.VCardTitle(classes="card-title d-flex align-center flex-wrap ga-2"):
+            v3.VIcon("mdi-school-outline", color="primary", size="small")
+            html.Span("Lesson: {{ lesson.title }}", classes="lesson-title")
+            v3.VSpacer()
+            v3.VBtn(
+                "Leave lesson",
+                prepend_icon="mdi-close",
+                size="small",
+                variant="tonal",
+                click="trigger('leave_lesson')",
+                classes="leave-lesson",
+            )
+        with v3.VCardText(classes="pt-1 pb-2"):
+            for label, key in (("Look", "look"), ("Why", "why"), ("Try", "try_next")):
+                with html.P(classes=f"lesson-text lesson-{key.replace('_', '-')}"):
+                    html.Span(f"{label}: ", classes="lesson-label")
+                    html.Span(f"{{{{ lesson.{key} }}}}")
+            with html.P(classes="lesson-text lesson-reference text-caption mb-0"):
+                html.Span("Read more: ", classes="lesson-label")
+                html.Span("{{ lesson.reference_title }}, ")
+                html.Code("{{ lesson.reference }}")
+                html.Span(" in the project's docs.")
+            html.P(
+                "{{ lesson.note }}",
+                v_if="lesson.note",
+                classes="lesson-text lesson-note text-deep-orange-darken-2 mb-0 mt-1",
+            )

@@ -232,10 +232,11 @@ class AppLogic:
         with self.state:
             self.state.update({**controls.as_state(), "input_message": "; ".join(messages)})
 
-    def open_lesson(self, key: Any = None, *_: Any, **__: Any) -> None:
-        """A lesson's button: its controls, mode and pixel selection in one flush, its card on
-        the page, then its frame (computed once even where nothing but the selection changed)."""
-        plan = self.lessons.plan(key, self.panel.initial)
+    def open_lesson(self, *args: Any, **__: Any) -> None:
+        """A lesson's button (its key the first argument): its controls, mode and pixel selection
+        in one flush, its card on the page, then its frame (computed once even where nothing but
+        the selection changed)."""
+        plan = self.lessons.plan(args[0] if args else None, self.panel.initial)
         if plan is None:
             return
         self.selection.array_pixels = plan.controls.pixels  # the selection is on its array

@@ -62,7 +62,7 @@ class Lesson:
     selection : the pixels to select, (row, col) on the lesson's array
     look, why, try_next : the card's three paragraphs, ``str.format`` templates of ``figures``
         (a template holds no digit of its own: every number on the card is a figure)
-    reference : the section that explains it, ``docs/physics.md#anchor``
+    reference : the section that explains it: ``docs/physics.md``, ``#``, one of its anchors
     reference_title : that section's title
     figures : the card's numbers, each computed again by the tests
     color_by, image_kind : the display choices (``app.state.COLOR_BY``, ``IMAGE_KINDS``)
@@ -476,18 +476,13 @@ def lesson_plan(lesson: Lesson, initial: Controls) -> LessonPlan:
 
 
 class LessonGuide:
-    """The lessons on a trame state: ``lesson_items`` (the buttons: key and title) and
-    ``lesson`` (the open lesson's card, or None)."""
+    """The lessons on a trame state: ``lesson``, the open lesson's card (None when none is open;
+    the page's buttons are built from ``LESSONS``, app.ui.lessons)."""
 
     def __init__(self, state):
         self.state = state
         self.open_key: str | None = None
-        self.state.update(
-            {
-                "lesson_items": [{"key": x.key, "title": x.title} for x in LESSONS],
-                "lesson": None,
-            }
-        )
+        self.state.lesson = None
 
     def plan(self, key: Any, initial: Controls) -> LessonPlan | None:
         """What lesson ``key`` sets, or None with a message on the page if there is no such

@@ -14,8 +14,10 @@ import re
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
 from scipy import signal
-from support.app_helpers import change, settle
+from support.app_helpers import ANYTHING, change, settle
 
 import simcore
 from app.engine import Engine
@@ -48,7 +50,7 @@ def pipeline():
 
 
 def open_lesson(app, key: str) -> simcore.Result:
-    app.logic.open_lesson(key)
+    app.server.controller.trigger_fn("open_lesson")(key)  # what the lesson's button calls
     settle(app)
     return app.logic.last_frame.result
 
@@ -444,7 +446,7 @@ def test_leaving_a_lesson_keeps_the_scene_the_mode_and_the_selection(app):
     before = {k: app.state[k] for k in (*app.logic.panel.current.as_state(), "mode", "fly_t_s")}
     selected, generation = app.state.selected_pixels, app.logic.runner.generation
     frame = app.logic.last_frame
-    app.logic.lessons.leave()
+    app.server.controller.trigger_fn("leave_lesson")()  # the card's button
     settle(app)
     assert app.state.lesson is None
     assert {k: app.state[k] for k in before} == before and app.state.selected_pixels == selected
@@ -486,17 +488,27 @@ def test_opening_the_same_lesson_twice_computes_its_frame_again_for_its_selectio
 def test_an_unknown_lesson_changes_nothing_and_says_so(app, key):
     open_lesson(app, "pixel-count")
     controls, generation = app.logic.panel.current, app.logic.runner.generation
-    app.logic.open_lesson(key)
+    app.server.controller.trigger_fn("open_lesson")(key)
     assert app.logic.panel.current == controls and app.logic.runner.generation == generation
     assert app.state.input_message.startswith("Lessons: no lesson ")
     assert len(app.state.input_message) < 120 and app.state.lesson["key"] == "pixel-count"
     app.state.input_message = ""
 
 
-def test_the_lessons_are_the_page_buttons_and_the_triggers_are_registered(app):
-    assert app.state.lesson_items == [{"key": x.key, "title": x.title} for x in LESSONS]
-    for name in ("open_lesson", "leave_lesson"):
-        assert app.server.controller.trigger_fn(name)
+@settings(
+    max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    args=st.lists(ANYTHING, max_size=3),
+    kwargs=st.dictionaries(st.just("key") | st.text(max_size=5), ANYTHING),
+)
+def test_the_lesson_triggers_take_anything_a_page_sends_without_raising(app, args, kwargs):
+    assume(not (args and isinstance(args[0], str) and args[0] in BY_KEY))  # a real lesson
+    controls = app.logic.panel.current
+    app.server.controller.trigger_fn("open_lesson")(*args, **kwargs)
+    app.server.controller.trigger_fn("leave_lesson")(*args, **kwargs)
+    assert app.logic.panel.current == controls and app.state.lesson is None
+    app.state.input_message = ""
 
 
 def test_on_another_target_a_lesson_sets_its_controls_and_its_card_says_whose_figures():

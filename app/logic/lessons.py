@@ -127,8 +127,9 @@ LESSONS: tuple[Lesson, ...] = (
             "surface, or depths closer together than the pulse is long."
         ),
         try_next=(
-            "Shift-click other pixels on the dish's edge. Change Pitch by a few degrees: the "
-            "peaks move apart or merge as the depths change."
+            "Change Pitch by one degree either way: the rim moves off these pixels and each "
+            "echo keeps one peak, the dish's or the structure's. Shift-click along the dish's "
+            "new edge to find two again."
         ),
         reference="docs/physics.md#eq-29",
         reference_title="Eq. 29, the pixel's impulse response",
@@ -168,8 +169,8 @@ LESSONS: tuple[Lesson, ...] = (
             "here {det:,} of {n_panel:,}, at {az_more:g}° {det_more:,}."
         ),
         try_next=(
-            "Drag Azimuth back to zero and on to {az_more:g}°, then raise the Pulse energy: the "
-            "diffuse term alone brings the panels back."
+            "Drag Azimuth back to zero and on to {az_more:g}°, then raise the Pulse energy: "
+            "with more light the weak diffuse term is enough, and the panels come back."
         ),
         reference="docs/physics.md#eq-6",
         reference_title="Eq. 6, the four-parameter BRDF (Table 1: the solar panel)",
@@ -363,8 +364,8 @@ LESSONS: tuple[Lesson, ...] = (
             "around the target, so the line of sight sweeps over the panels: here it meets them "
             "{inc:.1f}° from their normal, {graze:.1f}° from their plane. A face seen at grazing "
             "incidence shows almost no area and reflects almost nothing back (Eq. 6); the "
-            "rim's facets face the lidar. At t = {t0:.0f} s the panels were seen at "
-            "{inc0:.0f}°: {n_px0:,} pixels, {n_det0:,} points."
+            "rim's facets face the lidar ({inc_rim:.0f}° from their normal). At t = {t0:.0f} s "
+            "the panels were seen at {inc0:.0f}°: {n_px0:,} pixels, {n_det0:,} points."
         ),
         try_next=(
             "Drag the time slider or press play: the panels turn edge-on again at "
@@ -380,6 +381,7 @@ LESSONS: tuple[Lesson, ...] = (
             "n_det": 92,
             "n_rim": 90,
             "inc": 89.6,
+            "inc_rim": 28,
             "graze": 0.4,
             "t0": 0.0,
             "inc0": 59,
@@ -402,7 +404,8 @@ LESSONS: tuple[Lesson, ...] = (
         image_kind="background",
         look=(
             "The array image shows the background light. The Sun is behind the lidar "
-            "({sun_angle:.0f}° from the line of sight), so the MRO is fully lit: the selected "
+            "({sun_angle:.0f}° from the line of sight), so the MRO is lit all over ({sunlit:,} "
+            "of the {hit:,} pixels that see it): the selected "
             "panel pixel collects {bg_panel_nw:.0f} nW, the dish pixel {bg_dish_nw:.1f} nW (its "
             "curved face sends the sunlight elsewhere), the day-side Earth behind the target "
             "{bg_earth_nw:.0f} nW per pixel. The waveform chart draws the panel pixel's "
@@ -426,6 +429,8 @@ LESSONS: tuple[Lesson, ...] = (
         reference_title="The receiver with background light",
         figures={
             "sun_angle": 0.0,
+            "sunlit": 14448,
+            "hit": 14526,
             "bg_panel_nw": 78,
             "bg_dish_nw": 4.1,
             "bg_earth_nw": 14,

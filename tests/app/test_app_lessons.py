@@ -142,6 +142,11 @@ def figures_double_peak(app, pipeline, result) -> dict:
     for r, c in ((r1, c1), (r2, c2)):  # the dish (cover) in front of the structure behind it
         depth = part_range_m(result, r, c)
         assert set(depth) == {"cover", "default #2"} and depth["cover"] < depth["default #2"]
+    for pitch_deg, part in ((1.0, "cover"), (-1.0, "default #2")):  # what the card asks to try
+        pitched = variant(app, pipeline, "double-peak", pitch_deg=pitch_deg)
+        for r, c in ((r1, c1), (r2, c2)):
+            (peak_m,) = peaks_m(pitched, r, c)  # one peak, at that part's depth
+            assert abs(peak_m - part_range_m(pitched, r, c)[part]) < 0.3
     near_m, far_m = peaks_m(result, r1, c1)
     near2_m, far2_m = peaks_m(result, r2, c2)
     shape = result.echo.shape
@@ -183,6 +188,9 @@ def figures_panels_azimuth(app, pipeline, result) -> dict:
         seen = on_parts(other, PANELS)
         return int(seen.sum()), int((seen & other.detection.detected).sum())
 
+    bright = variant(app, pipeline, "panels-azimuth", azimuth_deg=5.0, pulse_energy_j=5e-3)
+    seen = on_parts(bright, PANELS)  # the card's "raise the Pulse energy": the panels are back
+    assert (seen & bright.detection.detected).sum() > 0.95 * seen.sum()
     n0, det0 = panel_points(0.0)
     az_more = 5.0  # the azimuth the card asks to try
     _, det_more = panel_points(az_more)
@@ -228,6 +236,10 @@ def figures_distance(app, pipeline, result) -> dict:
     ]
     snr_panel, snr_bus, snr_dish = (snr_at(result, r, c) for r, c in sel)
     assert not result.waveform(*sel[2]).detected  # the dish pixel gives no point
+    # close in the signal's own shot noise dominates the noise at the peak, far out it does not
+    for where, lo, hi in ((ref, 2.0, np.inf), (result, 1.0, 1.5)):
+        ratio_pk = np.median(where.receiver.sigma_pk_a) / where.receiver.noise_figures["sigma_n_a"]
+        assert lo < ratio_pk < hi
     assert max(result.target.extents_m) > d_close_m * close.scene.receive.fov_rad
     ratio = d_m / d_ref_m
     hit_ref = summary(ref, "n_hit_pixels")
@@ -324,6 +336,8 @@ def figures_flyaround_edge_on(app, pipeline, result) -> dict:
     assert parts[r1 * n + c1] == {"solar_L", "solar_edge"} and parts[r2 * n + c2] == {"solar_L"}
     i1, i2 = (int(np.searchsorted(result.echo.pixel, r * n + c)) for r, c in lesson.selection)
     assert detected[i1] and not detected[i2]
+    columns = np.unique(result.echo.pixel[on] % n, return_counts=True)[1]
+    assert columns.max() <= 2  # "a line a pixel or two high"
     return {
         "t": lesson.fly_t_s,
         "d": result.scene.pose.distance_m,
@@ -332,6 +346,7 @@ def figures_flyaround_edge_on(app, pipeline, result) -> dict:
         "n_det": int((on & detected).sum()),
         "n_rim": int((on & rim & detected).sum()),
         "inc": inc,
+        "inc_rim": incidence_deg(result, ["solar_edge"]),
         "graze": 90.0 - inc,
         "t0": t0_s,
         "inc0": incidence_deg(start, PANELS),
@@ -359,6 +374,8 @@ def figures_day_night(app, pipeline, result) -> dict:
     fw_nm = result.scene.receive.filter_width_m / 1e-9
     return {
         "sun_angle": summary(result, "sun_angle_deg"),
+        "sunlit": summary(result, "n_sunlit_pixels"),
+        "hit": summary(result, "n_hit_pixels"),
         "bg_panel_nw": 1e9 * power_w[rp, cp],
         "bg_dish_nw": 1e9 * power_w[rd, cd],
         "bg_earth_nw": 1e9 * float(np.median(power_w[earth_only])),

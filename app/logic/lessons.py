@@ -10,10 +10,10 @@ tests/app/test_app_lessons.py computes each one again from the simulation: the c
 rendered from the computed figures must equal the text rendered from the record's.
 
 The lessons are written for the paper scene (the MRO at 500 m, ``lmapd simulate`` with no
-options): a lesson starts from the app's initial controls and lists every setting of the scene's
-controls, so it gives the same frame whatever the user changed before. With another target (an
-upload, or ``--scene``) a lesson still sets its controls, and its card says that its figures are
-the MRO's.
+options): a lesson starts from the app's initial controls and sets every control it depends on
+(``PAPER_SETTINGS`` and its own), so it gives the same frame whatever the user changed before.
+With another target (the drop-down, an upload, ``--scene``) a lesson still sets its controls, and
+its card says that its figures are the MRO's.
 
 The parent (``AppLogic``) registers the page's ``open_lesson`` and ``leave_lesson`` triggers and
 calls :meth:`LessonGuide.plan` (what a lesson sets), :meth:`LessonGuide.opened` (the card on the
@@ -32,10 +32,11 @@ from app.state import MAX_SELECTED_PIXELS, Controls, echo
 
 MJ = 1e-3  # J per mJ: a pulse energy written as ``0.1 * MJ`` shows as 0.1 mJ on the slider
 NM = 1e-9  # m per nm: a filter width written as ``100 * NM`` shows as 100 nm
-LESSON_TARGET = "Mars Reconnaissance Orbiter"  # the target the figures are the MRO's
+LESSON_TARGET = "Mars Reconnaissance Orbiter"  # the target whose figures the cards give
 
 # The paper scene's controls as link settings (its pose, array, pulse, threshold, seed, fidelity,
-# no Sun): every lesson starts from these, so the same lesson gives the same frame.
+# no Sun, the linear-mode receiver): every lesson starts from these, so the same lesson gives the
+# same frame whatever was set before (the Geiger-mode parameters and the materials: the initial).
 PAPER_SETTINGS: dict[str, Any] = {
     "pitch_deg": 0.0,
     "azimuth_deg": 0.0,
@@ -49,6 +50,7 @@ PAPER_SETTINGS: dict[str, Any] = {
     "sun.azimuth_deg": 0.0,
     "sun.elevation_deg": 30.0,
     "receive.filter_width_m": 1 * NM,
+    "receiver.kind": "lm_apd",
 }
 
 
@@ -445,6 +447,52 @@ LESSONS: tuple[Lesson, ...] = (
             "fw_ratio": 100.0,
             "share_narrow": 0.6,
             "out_narrow": 157,
+        },
+    ),
+    Lesson(
+        key="lm-vs-gm",
+        title="Linear mode against Geiger mode: a few photons, far away",
+        settings={"receiver.kind": "gm_apd", "distance_m": 3000.0, "pulse_energy_j": 0.05 * MJ},
+        selection=((137, 111),),
+        look=(
+            "A Geiger-mode array at {d:,.0f} m with a {energy_mj:g} mJ pulse: {gm_pts} of the "
+            "{lit} lit pixels give a point, and none is false. The chart shows the selected "
+            "pixel's photon counts over the {pulses} pulses of the frame. Switch the Receiver to "
+            "Linear mode: {lm_pts} target points, {lm_out} false ones."
+        ),
+        why=(
+            "A Geiger-mode pixel fires on a single photoelectron. Here the median pixel gets "
+            "{pe:.1f} per pulse, and the densest pulse-wide window of its histogram stands out "
+            "from the background counts expected there. A linear-mode pixel must see its echo "
+            "above TNR times its noise in one flash: at this energy the median SNR is "
+            "{lm_snr:.2f}. The price is in the range: after an avalanche a pixel is dead for "
+            "{dead_ns:,.0f} ns, longer than the echo, so each pulse records its earliest photon "
+            "and the histogram leans to the echo's onset. The median range error is "
+            "{gm_err:.2f} m (after Coates' correction), against {lm_err:.3f} m for the linear "
+            "mode at {lm_energy_mj:g} mJ, where it gives {lm_pts_bright} points; and a frame "
+            "takes {pulses} pulses instead of one."
+        ),
+        try_next=(
+            "Switch the Receiver to Linear mode and raise the Pulse energy until the points come "
+            "back; in Geiger mode, lower the pulses per frame or raise the dark count rate."
+        ),
+        reference="docs/physics.md#geiger-mode",
+        reference_title="Beyond the paper: the Geiger-mode receiver",
+        figures={
+            "d": 3000.0,
+            "energy_mj": 0.05,
+            "gm_pts": 472,
+            "lit": 483,
+            "pulses": 100,
+            "lm_pts": 0,
+            "lm_out": 140,
+            "pe": 8.1,
+            "lm_snr": 0.09,
+            "dead_ns": 1000,
+            "gm_err": 0.28,
+            "lm_err": 0.020,
+            "lm_energy_mj": 5.0,
+            "lm_pts_bright": 279,
         },
     ),
 )

@@ -393,6 +393,42 @@ def figures_day_night(app, pipeline, result) -> dict:
     }
 
 
+def figures_lm_vs_gm(app, pipeline, result) -> dict:
+    lesson = BY_KEY["lm-vs-gm"]
+    lm_energy_mj = 5.0
+    lm = variant(app, pipeline, "lm-vs-gm", **{"receiver.kind": "lm_apd"})
+    bright = variant(
+        app, pipeline, "lm-vs-gm", **{"receiver.kind": "lm_apd", "pulse_energy_j": 5e-3}
+    )
+    (row, col), n = lesson.selection[0], result.pixels
+    assert result.waveform(row, col).detected and pixel_parts(result)[row * n + col] == {"solar_L"}
+    names = [trace["name"] for trace in app.state.waveforms["data"]]
+    assert any(n.startswith(f"({row}, {col}) counts") for n in names)  # photon histogram
+
+    def range_error_m(r: simcore.Result) -> float:
+        d = r.detection
+        return float(np.median(np.abs(d.range_m - d.range_true_m)[d.detected]))
+
+    d = result.detection
+    assert np.median((d.range_m - d.range_true_m)[d.detected]) < 0  # early: the onset
+    return {
+        "d": result.scene.pose.distance_m,
+        "energy_mj": energy_mj(lesson),
+        "gm_pts": summary(result, "n_target_points"),
+        "lit": summary(result, "n_lit_pixels"),
+        "pulses": result.scene.gm.pulses,
+        "lm_pts": summary(lm, "n_target_points"),
+        "lm_out": summary(lm, "n_outliers"),
+        "pe": result.receiver.noise_figures["signal_pe_median"],
+        "lm_snr": summary(lm, "snr_median"),
+        "dead_ns": result.scene.gm.dead_time_s * 1e9,
+        "gm_err": range_error_m(result),
+        "lm_err": range_error_m(bright),
+        "lm_energy_mj": lm_energy_mj,
+        "lm_pts_bright": summary(bright, "n_target_points"),
+    }
+
+
 FIGURES = {
     "double-peak": figures_double_peak,
     "panels-azimuth": figures_panels_azimuth,
@@ -401,6 +437,7 @@ FIGURES = {
     "pixel-count": figures_pixel_count,
     "flyaround-edge-on": figures_flyaround_edge_on,
     "day-night": figures_day_night,
+    "lm-vs-gm": figures_lm_vs_gm,
 }
 
 

@@ -53,13 +53,15 @@ def _spread(values) -> dict[str, float]:
     return {"median": statistics.median(values), "min": min(values), "max": max(values)}
 
 
-def ray_cast_s(caster: geometry.RayCaster, rays: geometry.RayGrid, scene) -> float:
-    """Wall time [s] of the ray cast alone: every sub-ray of ``rays`` for the target in the
-    scene's pose (into the target frame, through Embree, ranges and faces out), as the hits stage
-    casts them, on the frame's threads with BLAS serial."""
+def ray_cast_s(caster: geometry.RayCaster, rays, scene) -> float:
+    """Wall time [s] of the ray cast alone: every sub-ray of ``rays`` (a RayGrid, or (n, 3) unit
+    sensor-frame directions) for the target in the scene's pose (into the target frame, through
+    Embree, ranges and faces out), as the hits stage casts them, on the frame's threads with BLAS
+    serial."""
     model = caster.model
     pose = geometry.target_pose(scene.pose, model.extents_m, model.body_from_mesh)
-    directions = rays.directions.reshape(-1, 3)
+    directions = rays.directions if isinstance(rays, geometry.RayGrid) else rays
+    directions = directions.reshape(-1, 3)
     with parallel.blas_serial():
         t0 = time.perf_counter()
         geometry.cast_ranges(caster, directions, pose)

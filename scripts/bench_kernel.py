@@ -14,8 +14,9 @@ Each round runs, for A then B, two fresh processes on the paper scene (the MRO):
 
 A process reports the median of its warm frames (frame, echo stage, ray cast, frame / ray cast);
 the table gives, for each figure, the median over the rounds and its range (min-max), and the
-ratio B / A round by round. The load average is printed before and after: other processes take
-cores from the frames.
+ratio B / A round by round. With ``--before DIR`` a third process runs each time, on the code in
+DIR (an older checkout, put first on PYTHONPATH): the speed-up against it. The load average is
+printed before and after: other processes take cores from the frames.
 """
 
 from __future__ import annotations
@@ -31,11 +32,24 @@ from pathlib import Path
 
 PROBE = r"""
 import json, statistics, sys, time
-from simcore.cli.bench.stages import FRAME_STAGES, ray_cast_s
+from simcore import geometry, parallel
 from simcore.geometry import RayCaster, stage_rays
 from simcore.pipeline import Pipeline
 from simcore.scene import load_scene, with_overrides
 from simcore.target import load_target
+
+# self-contained (no simcore.cli.bench), so that it also runs on older code (--before)
+FRAME_STAGES = ("hits", "echo", "background", "receiver", "detection", "cloud")
+
+
+def ray_cast_s(caster, rays, scene):
+    model = caster.model
+    pose = geometry.target_pose(scene.pose, model.extents_m, model.body_from_mesh)
+    with parallel.blas_serial():
+        t0 = time.perf_counter()
+        geometry.cast_ranges(caster, rays.directions.reshape(-1, 3), pose)
+        return time.perf_counter() - t0
+
 
 which, repeats = sys.argv[1], int(sys.argv[2])
 base = load_scene()
@@ -64,7 +78,7 @@ for n, (name, keys) in enumerate(configs):
         nudged = with_overrides(scene, {"pose.roll_deg": 1e-6 * ((i + 1) % 2)})
         result = pipe.run(nudged)
         timings = result.timings_s
-        frames.append(sum(timings[s] for s in FRAME_STAGES))
+        frames.append(sum(timings[s] for s in FRAME_STAGES if s in timings))
         echoes.append(timings["echo"])
         casts.append(ray_cast_s(caster, rays, nudged))
     out[name] = {
@@ -78,6 +92,7 @@ sys.stdout.write(json.dumps(out) + "\n")
 """
 
 BACKENDS = {"A kernel": {}, "B numpy": {"LMAPD_NO_NUMBA": "1"}}
+BEFORE = "C before"  # --before DIR: the code in DIR (an older checkout), in the same rounds
 
 
 def probe(which: str, repeats: int, env_extra: dict[str, str]) -> dict:
@@ -112,14 +127,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--repeats", type=int, default=7)
     parser.add_argument("--json", help="also write the figures to this JSON file")
+    parser.add_argument(
+        "--before", help="also time the code in this folder (an older checkout: PYTHONPATH)"
+    )
     args = parser.parse_args(argv)
+    backends = dict(BACKENDS)
+    if args.before:
+        backends[BEFORE] = {"PYTHONPATH": str(Path(args.before).resolve())}
+        probe("default", 1, backends[BEFORE])  # its on-disk caches filled before the clock
 
     load_before = os.getloadavg()
     print(f"{os.cpu_count()} cores; load average {load_before[0]:.2f}", file=sys.stderr)
-    runs: dict[str, dict[str, list[dict]]] = {b: {"default": [], "reference": []} for b in BACKENDS}
+    runs: dict[str, dict[str, list[dict]]] = {b: {"default": [], "reference": []} for b in backends}
     for r in range(args.rounds):
         for which in ("default", "reference"):
-            for backend, env in BACKENDS.items():
+            for backend, env in backends.items():
                 runs[backend][which].append(probe(which, args.repeats, env))
         print(f"round {r + 1}/{args.rounds} done", file=sys.stderr)
     load_after = os.getloadavg()
@@ -154,12 +176,24 @@ def main(argv: list[str] | None = None) -> int:
             f"{spread(series(b, which, name, 'echo_s'))} | "
             f"{spread(ratio_echo, 1, '.1f')}x, {spread(ratio_frame, 1, '.1f')}x |"
         )
+    if args.before:
+        print()
+        print(f"{BEFORE} ({args.before}): frame / echo (ms), and before / A: echo, frame")
+        for which, name in rows:
+            c = BEFORE
+            echo = ratios(series(a, which, name, "echo_s"), series(c, which, name, "echo_s"))
+            frame = ratios(series(a, which, name, "frame_s"), series(c, which, name, "frame_s"))
+            print(
+                f"| {name} | {spread(series(c, which, name, 'frame_s'))} / "
+                f"{spread(series(c, which, name, 'echo_s'))} | "
+                f"{spread(echo, 1, '.1f')}x, {spread(frame, 1, '.1f')}x |"
+            )
     print()
     print("The first frame of a fresh process (cold) against the warm frames' median:")
     print("| run | backend | cold frame (ms) | cold echo (ms) | warm frame (ms) | cold / warm |")
     print("|---|---|---|---|---|---|")
     for which, name in (("default", "256x256x4"), ("reference", "reference 256x256")):
-        for backend in BACKENDS:
+        for backend in backends:
             cold = [run["cold"]["frame_s"] for run in runs[backend][which]]
             warm = series(backend, which, name, "frame_s")
             print(

@@ -63,8 +63,10 @@ BACKEND_ENV = {"kernel": {}, "numpy": {"LMAPD_NO_NUMBA": "1"}}
 
 def echo_backend() -> str:
     """On a worker: "kernel" if its echo features use the compiled kernel, else "numpy"."""
-    from simcore.echo.features import compiled_kernel
-
+    try:
+        from simcore.echo.features import compiled_kernel
+    except ImportError:  # code from before the kernel (a baseline on PYTHONPATH)
+        return "numpy"
     return "kernel" if compiled_kernel() is not None else "numpy"
 
 

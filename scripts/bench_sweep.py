@@ -1,7 +1,7 @@
 """Benchmark: the same sweep on a Dask LocalCluster of 1 worker, then of 2 workers; prints figures.
 
     .venv/bin/python scripts/bench_sweep.py [--frames 200] [--pixels 128] [--workers 1 2]
-                                            [--repeats 3] [--json FILE]
+                                            [--backends kernel numpy] [--repeats 3] [--json FILE]
 
 The sweep: the paper scene at PIXELS x PIXELS (4 sub-rays, the default fidelity), a grid of
 pitch x azimuth giving FRAMES frames (200 = 20 pitches x 10 azimuths), no point clouds.
@@ -13,8 +13,12 @@ clock starts (``sweep.warm_workers``), which loads the MRO mesh and builds its B
 cost paid once per worker. Both clusters are started and warmed first and stay up (idle workers
 cost nothing); with --repeats N the configurations then run in turn, N rounds, and each one's
 fastest run counts (all are printed): on a shared machine the fastest run is the one least
-disturbed by other processes. The load average is printed before and after, since other
-processes take cores from the workers.
+disturbed by other processes (the median and range of the runs are printed too). The load
+average is printed before and after, since other processes take cores from the workers.
+
+With ``--backends kernel numpy`` every worker count gets two clusters: one whose workers compute
+the echo features with the compiled kernel (the default) and one whose workers have
+``LMAPD_NO_NUMBA=1`` (the numpy path); each cluster's workers are asked which one they use.
 
 Per-frame cost: the sweep's wall time / frames on 1 worker (the throughput of one core,
 overheads included) and the median and mean ``frame_s`` of the table (the simulation alone, as
@@ -54,8 +58,21 @@ def bench_sweep(frames: int, pixels: int):
     )
 
 
-def start_cluster(stack: contextlib.ExitStack, n_workers: int, scene) -> dict:
-    """A LocalCluster of ``n_workers`` single-threaded processes, warmed with ``scene``."""
+BACKEND_ENV = {"kernel": {}, "numpy": {"LMAPD_NO_NUMBA": "1"}}
+
+
+def echo_backend() -> str:
+    """On a worker: "kernel" if its echo features use the compiled kernel, else "numpy"."""
+    try:
+        from simcore.echo.features import compiled_kernel
+    except ImportError:  # code from before the kernel (a baseline on PYTHONPATH)
+        return "numpy"
+    return "kernel" if compiled_kernel() is not None else "numpy"
+
+
+def start_cluster(stack: contextlib.ExitStack, n_workers: int, scene, backend: str) -> dict:
+    """A LocalCluster of ``n_workers`` single-threaded processes with the echo ``backend``
+    ("kernel" or "numpy"), warmed with ``scene``."""
     from distributed import Client, LocalCluster
 
     t0 = time.perf_counter()
@@ -66,15 +83,21 @@ def start_cluster(stack: contextlib.ExitStack, n_workers: int, scene) -> dict:
             processes=True,
             dashboard_address=":0",
             silence_logs=logging.ERROR,
+            env=BACKEND_ENV[backend],
         )
     )
     client = stack.enter_context(Client(cluster))
     start_s = time.perf_counter() - t0
+    warm_up_s = warm_workers(client, scene)
+    used = set(client.run(echo_backend).values())
+    if used != {backend}:
+        raise SystemExit(f"workers meant for the {backend} path use {used}")
     return {
         "workers": n_workers,
+        "backend": backend,
         "client": client,
         "cluster_start_s": start_s,
-        "warm_up_s": warm_workers(client, scene),
+        "warm_up_s": warm_up_s,
         "wall_s_all": [],
         "frame_s_all": [],
     }
@@ -97,10 +120,12 @@ def figures(run: dict) -> dict:
     times = run["frame_s_all"][best]
     return {
         "workers": run["workers"],
+        "backend": run["backend"],
         "cluster_start_s": run["cluster_start_s"],
         "warm_up_s": run["warm_up_s"],
         "wall_s": run["wall_s_all"][best],
         "wall_s_all": run["wall_s_all"],
+        "wall_s_median": float(np.median(run["wall_s_all"])),
         "frame_s_median": float(np.median(times)),
         "frame_s_mean": float(np.mean(times)),
     }
@@ -111,6 +136,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--frames", type=int, default=200)
     parser.add_argument("--pixels", type=int, default=128)
     parser.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--backends", nargs="+", choices=sorted(BACKEND_ENV), default=["kernel"])
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--json", help="also write the figures to this JSON file")
     args = parser.parse_args(argv)
@@ -125,7 +151,11 @@ def main(argv: list[str] | None = None) -> int:
         file=sys.stderr,
     )
     with contextlib.ExitStack() as stack:  # every cluster up and warm before the first clock
-        clusters = [start_cluster(stack, w, sweep.frames[0].scene) for w in args.workers]
+        clusters = [
+            start_cluster(stack, w, sweep.frames[0].scene, b)
+            for w in args.workers
+            for b in args.backends
+        ]
         for _ in range(args.repeats):  # interleaved, so a busy spell hits every configuration
             for run in clusters:
                 time_sweep(sweep, run)
@@ -133,19 +163,30 @@ def main(argv: list[str] | None = None) -> int:
     for r in runs:
         w = r["workers"]
         print(
-            f"{w} worker{'s' if w > 1 else ' '}: {r['wall_s']:7.2f} s  "
+            f"{w} worker{'s' if w > 1 else ' '} {r['backend']:6}: {r['wall_s']:7.2f} s  "
             f"{1e3 * r['wall_s'] / n:6.1f} ms/frame  {n / r['wall_s']:6.1f} frames/s  "
             f"(frame_s median {1e3 * r['frame_s_median']:.1f} ms, mean "
-            f"{1e3 * r['frame_s_mean']:.1f} ms; runs "
+            f"{1e3 * r['frame_s_mean']:.1f} ms; runs median {r['wall_s_median']:.2f} s: "
             f"{', '.join(f'{x:.2f}' for x in r['wall_s_all'])} s; "
             f"cluster start {r['cluster_start_s']:.1f} s, warm-up {r['warm_up_s']:.1f} s)"
         )
-    base = runs[0]
-    for r in runs[1:]:
-        print(
-            f"speed-up {r['workers']} vs {base['workers']} workers: "
-            f"{base['wall_s'] / r['wall_s']:.2f} x"
-        )
+    for b in args.backends:
+        same = [r for r in runs if r["backend"] == b]
+        for r in same[1:]:
+            print(
+                f"speed-up {r['workers']} vs {same[0]['workers']} workers ({b}): "
+                f"{same[0]['wall_s'] / r['wall_s']:.2f} x"
+            )
+    if len(args.backends) > 1:
+        for w in args.workers:
+            by = {r["backend"]: r for r in runs if r["workers"] == w}
+            k, n = by["kernel"]["wall_s_all"], by["numpy"]["wall_s_all"]
+            pairs = sorted(y / x for x, y in zip(k, n, strict=True))
+            print(
+                f"numpy / kernel on {w} worker{'s' if w > 1 else ''}: fastest runs "
+                f"{by['numpy']['wall_s'] / by['kernel']['wall_s']:.2f} x, round by round "
+                f"{np.median(pairs):.2f} x ({pairs[0]:.2f}-{pairs[-1]:.2f})"
+            )
     load_after = os.getloadavg()
     print(f"load average before {load_before[0]:.2f}, after {load_after[0]:.2f}")
     if load_before[0] > _QUIET_LOAD:

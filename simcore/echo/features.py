@@ -95,6 +95,11 @@ def _eval_exact(shape: PulseShape, table, arrivals, weights, t):
 # echo bends, and stalled up to 1.5 mm from the crossing on multi-surface pixels after 4 steps
 HALF_STEPS = 8
 CFD_STEPS = 6
+# Fewer pixels than this take the compiled kernel on one thread: a 2-thread parallel region must
+# wake a second thread, and on a busy machine that thread waits for a core, 3-6 ms whatever the
+# work (measured: 64 x 64 frames' features 1.0 ms on one thread against 7.0 ms on two, load ~2.6
+# on 2 cores); from about 2000 pixels (~3 ms of work) two threads win. Results do not depend on it.
+SERIAL_BELOW_PIXELS = 2048
 
 
 def _illinois(f, ta, tb, fa, fb, steps: int):
@@ -234,7 +239,7 @@ def echo_features(
     buckets = 2 ** np.ceil(np.log2(np.maximum(np.arange(k_max + 1), 1))).astype(np.int64)
     begin = np.array([window_begin_s(shape, int(k), dt_s) for k in buckets])
     if kernel is not None:
-        kernel.set_threads(parallel.threads())
+        kernel.set_threads(1 if len(arrivals) < SERIAL_BELOW_PIXELS else parallel.threads())
         out = kernel.echo_features(
             shape, arrivals, weights, dt_s, cfd_delay_s, cfd_fraction, raw_peak, begin,
             (HALF_STEPS, CFD_STEPS),

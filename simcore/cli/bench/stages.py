@@ -1,12 +1,17 @@
 """``lmapd bench``: median stage timings on the MRO, cached re-run times and peak memory.
 
-A frame's time is the sum of the stages that a pose change re-runs (hits, echo, receiver,
-detection, cloud); loading the mesh and building the BVH happen once per target and are reported
-apart. Figures are medians over repeats; they are printed, never asserted.
+A frame's time is the sum of the stages that a pose change re-runs (hits, echo, background,
+receiver, detection, cloud); loading the mesh and building the BVH happen once per target and are
+reported apart. Beside each frame the bench times the floor, the ray cast alone (every sub-ray of
+the frame into the target frame and through Embree, :func:`simcore.geometry.cast_ranges`, on the
+frame's threads), interleaved with the frames so that a busy spell of a shared machine slows both;
+the frame / ray-cast ratio is taken round by round. Figures are medians with their range (min-max)
+over the repeats; they are printed, never asserted.
 """
 
 from __future__ import annotations
 
+import os
 import statistics
 import subprocess
 import sys
@@ -14,12 +19,13 @@ import time
 
 from tqdm import tqdm
 
+from ... import geometry, parallel
 from ...pipeline import STAGES, Pipeline
 from ...scene import load_scene, with_overrides
 from ...target import load_target
 from ..common import say
 
-FRAME_STAGES = ("hits", "echo", "receiver", "detection", "cloud")
+FRAME_STAGES = ("hits", "echo", "background", "receiver", "detection", "cloud")
 
 _MEMORY_PROBE = r"""
 import sys
@@ -41,18 +47,48 @@ def high_water_mb() -> float:
     raise OSError("no VmHWM in /proc/self/status")
 
 
-def _median_run(pipe: Pipeline, scenes, repeats: int):
-    """Run alternating scenes; return median total of FRAME_STAGES and median per stage [s]."""
+def _spread(values) -> dict[str, float]:
+    """Median, min and max of ``values``."""
+    values = list(values)
+    return {"median": statistics.median(values), "min": min(values), "max": max(values)}
+
+
+def ray_cast_s(caster: geometry.RayCaster, rays, scene) -> float:
+    """Wall time [s] of the ray cast alone: every sub-ray of ``rays`` (a RayGrid, or (n, 3) unit
+    sensor-frame directions) for the target in the scene's pose (into the target frame, through
+    Embree, ranges and faces out), as the hits stage casts them, on the frame's threads with BLAS
+    serial."""
+    model = caster.model
+    pose = geometry.target_pose(scene.pose, model.extents_m, model.body_from_mesh)
+    directions = rays.directions if isinstance(rays, geometry.RayGrid) else rays
+    directions = directions.reshape(-1, 3)
+    with parallel.blas_serial():
+        t0 = time.perf_counter()
+        geometry.cast_ranges(caster, directions, pose)
+        return time.perf_counter() - t0
+
+
+def _median_run(pipe: Pipeline, scenes, repeats: int, caster=None, rays=None):
+    """Run alternating scenes; return the median total of FRAME_STAGES [s], the median per stage
+    [s] and the frames' range; with ``caster`` and ``rays`` also the ray cast alone, timed after
+    each frame (median, min, max [s]), and the frame / ray-cast ratio taken round by round."""
     pipe.run(scenes[0])
     pipe.run(scenes[1])  # warm both
     per_stage = {s: [] for s in STAGES}
-    totals = []
+    totals, casts = [], []
     for i in range(repeats):
         result = pipe.run(scenes[i % 2])
         for s in STAGES:
             per_stage[s].append(result.timings_s[s])
         totals.append(sum(result.timings_s[s] for s in FRAME_STAGES))
-    return statistics.median(totals), {s: statistics.median(v) for s, v in per_stage.items()}
+        if caster is not None:
+            casts.append(ray_cast_s(caster, rays, scenes[i % 2]))
+    stages = {s: statistics.median(v) for s, v in per_stage.items()}
+    floor = {"frame_spread_s": _spread(totals)}
+    if casts:
+        floor["ray_cast_s"] = _spread(casts)
+        floor["ratio"] = _spread(t / c for t, c in zip(totals, casts, strict=True))
+    return statistics.median(totals), stages, floor
 
 
 def peak_memory_mb(pixels: int, subrays: int) -> tuple[float, float]:
@@ -69,14 +105,14 @@ def peak_memory_mb(pixels: int, subrays: int) -> tuple[float, float]:
 def run(quick: bool = False) -> dict:
     repeats = 5 if quick else 15
     sizes = (64, 128, 256) if quick else (64, 128, 256, 512)
+    load_before = os.getloadavg()
     scene = load_scene()
     t0 = time.perf_counter()
     model = load_target(scene.target)
     t_load = time.perf_counter() - t0
-    from ...geometry import RayCaster  # noqa: PLC0415
 
     t0 = time.perf_counter()
-    RayCaster(model)
+    caster = geometry.RayCaster(model)
     t_bvh = time.perf_counter() - t0
 
     pipe = Pipeline()
@@ -85,8 +121,11 @@ def run(quick: bool = False) -> dict:
     for pixels, subrays in tqdm(configs, desc="frames", unit="config", file=sys.stderr):
         base = with_overrides(scene, {"pixels": pixels, "fidelity.subrays": subrays})
         pair = [with_overrides(base, pitch_deg=0.0), with_overrides(base, pitch_deg=0.5)]
-        total, stages = _median_run(pipe, pair, repeats)
-        rows.append({"pixels": pixels, "subrays": subrays, "frame_s": total, "stages_s": stages})
+        rays = geometry.stage_rays(base)
+        total, stages, floor = _median_run(pipe, pair, repeats, caster, rays)
+        rows.append(
+            {"pixels": pixels, "subrays": subrays, "frame_s": total, "stages_s": stages, **floor}
+        )
 
     base = with_overrides(scene, {"pixels": 256, "fidelity.subrays": 4})
     rerun = {}
@@ -95,7 +134,7 @@ def run(quick: bool = False) -> dict:
         ("pulse_energy", "pulse_energy_j", (5e-3, 5.1e-3)),
     ):
         pair = [with_overrides(base, {key: v}) for v in values]
-        total, _ = _median_run(pipe, pair, repeats * 2)
+        total, _, _ = _median_run(pipe, pair, repeats * 2)
         rerun[name] = total
     base_mb, peak_mb = peak_memory_mb(256, 16)
     return {
@@ -105,22 +144,43 @@ def run(quick: bool = False) -> dict:
         "rerun_256_s": rerun,
         "memory_256x256x16_mb": {"after_imports": base_mb, "peak": peak_mb},
         "repeats": repeats,
+        "load_average": {"before": load_before[0], "after": os.getloadavg()[0]},
     }
+
+
+def _ms(spread: dict[str, float]) -> str:
+    return f"{spread['median'] * 1e3:.1f} ({spread['min'] * 1e3:.1f}-{spread['max'] * 1e3:.1f})"
 
 
 def format_table(fig: dict) -> str:
     lines = [
         f"MRO mesh load {fig['mesh_load_s'] * 1e3:.0f} ms, BVH build {fig['bvh_build_s'] * 1e3:.0f}"
         " ms (once per target)",
+    ]
+    if "load_average" in fig:
+        load = fig["load_average"]
+        lines.append(
+            f"{fig['repeats']} frames per configuration, median (min-max); 1-minute load average "
+            f"{load['before']:.2f} before, {load['after']:.2f} after"
+        )
+    lines += [
         "",
-        "| pixels | sub-rays | frame (ms) | hits | echo | receiver | detection | cloud |",
-        "|---|---|---|---|---|---|---|---|",
+        "| pixels | sub-rays | frame (ms) | ray cast alone (ms) | frame / ray cast | hits | echo "
+        "| background | receiver | detection | cloud |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in fig["frames"]:
         s = r["stages_s"]
         cells = " | ".join(f"{s[k] * 1e3:.1f}" for k in FRAME_STAGES)
         size = f"{r['pixels']} x {r['pixels']}"
-        lines.append(f"| {size} | {r['subrays']} | {r['frame_s'] * 1e3:.1f} | {cells} |")
+        frame = _ms(r["frame_spread_s"]) if "frame_spread_s" in r else f"{r['frame_s'] * 1e3:.1f}"
+        if "ray_cast_s" in r:
+            q = r["ratio"]
+            cast = _ms(r["ray_cast_s"])
+            ratio = f"{q['median']:.2f} ({q['min']:.2f}-{q['max']:.2f})"
+        else:
+            cast = ratio = "-"
+        lines.append(f"| {size} | {r['subrays']} | {frame} | {cast} | {ratio} | {cells} |")
     rr = fig["rerun_256_s"]
     mem = fig["memory_256x256x16_mb"]
     lines += [

@@ -4,6 +4,10 @@
 Errors compare noise-free quantities, so that they measure the model and not the random draw:
 range RMSE over the pixels lit in both runs (the Eq. 31 range, which carries the waveform bias),
 the expected point count (sum of P_d), and the relative L2 error of the band-limited waveforms.
+
+Each frame is followed by its floor, the ray cast alone: every ray the preset's hits stage cast
+for it (the base sub-rays, the pixel corners where the preset probes them, the refined pixels'
+sub-rays), cast again in one call (:func:`simcore.cli.bench.stages.ray_cast_s`).
 """
 
 from __future__ import annotations
@@ -16,11 +20,14 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from ... import geometry
 from ...echo import echo_waveform
 from ...io import atomic_path, write_json
 from ...pipeline import Pipeline, Result
 from ...scene import PRESETS, load_scene, with_overrides
+from ...target import load_target
 from ..common import say
+from .stages import ray_cast_s
 
 ATTITUDES = (
     {"pitch_deg": 0.0, "azimuth_deg": 0.0},  # the paper's front view
@@ -32,13 +39,31 @@ ATTITUDES = (
 WAVEFORM_SAMPLE = 300  # pixels per attitude for the waveform error
 
 
-def _frame(pipe: Pipeline, scene, i: int) -> tuple[Result, float]:
-    """One full frame (the pose stages re-run: the pose is nudged between calls) and its wall
-    time [s]."""
+def _frame(pipe: Pipeline, scene, i: int, caster) -> tuple[Result, float, float]:
+    """One full frame (the pose stages re-run: the pose is nudged between calls), its wall
+    time [s] and then the wall time of its ray cast alone [s]."""
     nudged = with_overrides(scene, {"pose.roll_deg": 1e-6 * (i % 2)})
     t0 = time.perf_counter()
     result = pipe.run(nudged)
-    return result, time.perf_counter() - t0
+    wall = time.perf_counter() - t0
+    return result, wall, ray_cast_s(caster, frame_rays(nudged, result), nudged)
+
+
+def frame_rays(scene, result: Result) -> np.ndarray:
+    """(n, 3) unit sensor-frame directions of every ray the hits stage cast for ``result``: the
+    base sub-rays, the pixel corners if the scene probes them, the refined pixels' sub-rays."""
+    rays = result.rays
+    parts = [rays.directions.reshape(-1, 3)]
+    if scene.fidelity.refine_subrays > rays.subrays:
+        if scene.fidelity.probe_corners:
+            parts.append(geometry.corner_directions(rays.pixels, rays.fov_rad))
+        refined = result.hits.refined_pixels
+        if len(refined):
+            dirs = geometry.subray_directions(
+                rays.pixels, rays.fov_rad, scene.fidelity.refine_subrays, refined
+            )
+            parts.append(dirs.reshape(-1, 3))
+    return np.concatenate(parts)
 
 
 def waveform_l2_error(result: Result, reference: Result, pixels, rng) -> float:
@@ -85,24 +110,29 @@ def run(repeats: int = 5, pixels: int = 256) -> dict:
     pipes = {p: Pipeline() for p in order}  # one cache each: a frame re-runs only the pose stages
     for preset, pipe in pipes.items():
         pipe.run(with_overrides(base, {"preset": preset}))  # mesh, BVH and ray grid, once
+    caster = geometry.RayCaster(load_target(base.target))  # the floor's (the same BVH)
     rng = np.random.default_rng(0)
     rows = []
     progress = tqdm(total=len(ATTITUDES) * repeats, desc="trade-off", unit="round", file=sys.stderr)
     for att in ATTITUDES:
         scenes = {p: with_overrides(base, {"preset": p, **att}) for p in order}
         times: dict[str, list[float]] = {p: [] for p in order}
+        casts: dict[str, list[float]] = {p: [] for p in order}
         stages: dict[str, list[dict]] = {p: [] for p in order}
         results = {}
         for i in range(repeats):
             for preset in order:
-                results[preset], wall = _frame(pipes[preset], scenes[preset], i + 1)
+                results[preset], wall, cast = _frame(pipes[preset], scenes[preset], i + 1, caster)
                 times[preset].append(wall)
+                casts[preset].append(cast)
                 stages[preset].append(results[preset].timings_s)
             progress.update()
         ref_time = statistics.median(times["reference"])
         for preset in order:
             wall = statistics.median(times[preset])
             row = {"preset": preset, **att, "time_s": wall, "speedup": ref_time / wall}
+            row["ray_cast_s"] = statistics.median(casts[preset])
+            row["rays"] = int(len(frame_rays(scenes[preset], results[preset])))
             for stage in ("hits", "echo"):  # where the time goes: rays, then echoes
                 row[f"{stage}_s"] = statistics.median(t[stage] for t in stages[preset])
             row.update(compare(results[preset], results["reference"], rng))
@@ -128,6 +158,11 @@ def summary(fig: dict) -> list[dict]:
                 "waveform_l2_max": max(r["waveform_l2"] for r in rows),
                 "hits_s": statistics.median(r["hits_s"] for r in rows),
                 "echo_s": statistics.median(r["echo_s"] for r in rows),
+                "ray_cast_s": statistics.median(r["ray_cast_s"] for r in rows),
+                "ray_cast_s_min": min(r["ray_cast_s"] for r in rows),
+                "ray_cast_s_max": max(r["ray_cast_s"] for r in rows),
+                "time_s_min": min(r["time_s"] for r in rows),
+                "time_s_max": max(r["time_s"] for r in rows),
                 "refined_share_max": max(r["refined_share"] for r in rows),
             }
         )
@@ -151,13 +186,12 @@ def plot(fig: dict, path: Path) -> None:
             and r["azimuth_deg"] == att["azimuth_deg"]
             and r["preset"] != "reference"
         ):
-            ax.scatter(
-                r["time_s"] * 1e3,
-                max(r["range_rmse_m"] * 1e3, 1e-3),
-                color=colours[r["preset"]],
-                marker=markers[k],
-                s=50,
-            )
+            y = max(r["range_rmse_m"] * 1e3, 1e-3)
+            c = colours[r["preset"]]
+            ax.scatter(r["time_s"] * 1e3, y, color=c, marker=markers[k], s=50)
+            if "ray_cast_s" in r:  # the floor: this frame's rays cast alone, joined to the frame
+                ax.plot([r["ray_cast_s"] * 1e3, r["time_s"] * 1e3], [y, y], color=c, lw=0.7)
+                ax.scatter(r["ray_cast_s"] * 1e3, y, color=c, marker="|", s=90)
         ref = next(
             r
             for r in fig["rows"]
@@ -181,7 +215,13 @@ def plot(fig: dict, path: Path) -> None:
             marker=markers[k],
             label=f"pitch {att['pitch_deg']:.0f}, azimuth {att['azimuth_deg']:.0f} deg",
         )
-    ref_time = statistics.median(r["time_s"] for r in fig["rows"] if r["preset"] == "reference")
+    ref_rows = [r for r in fig["rows"] if r["preset"] == "reference"]
+    ref_time = statistics.median(r["time_s"] for r in ref_rows)
+    if all("ray_cast_s" in r for r in fig["rows"]):
+        ax.scatter([], [], color="0.4", marker="|", s=90, label="its rays cast alone (floor)")
+        ref_cast = statistics.median(r["ray_cast_s"] for r in ref_rows)
+        ax.axvline(ref_cast * 1e3, color="black", ls="-.", lw=1)
+        ax.plot([], [], color="black", ls="-.", lw=1, label="reference's rays cast alone")
     goals = (("interactive", 20.0, 5.0), ("balanced", 5.0, 2.0))  # the issue's targets
     for preset, speedup, rmse_mm in goals:
         c = colours[preset]
@@ -217,15 +257,18 @@ def main(out_dir: str, quick: bool = False, pixels: int | None = None) -> int:
     plot(fig, out / "tradeoff.png")
     say(f"{n} x {n} pixels, the paper scene at {len(ATTITUDES)} attitudes:")
     say(
-        "| preset | median time (ms): all / hits / echo | speed-up vs "
-        "reference (min / median) | range RMSE max (mm) | point count diff max (%) | "
-        "waveform L2 max | refined share of lit pixels, max |"
+        "| preset | median time (ms): all / hits / echo | ray cast alone (ms) | frame / ray cast "
+        "| speed-up vs reference (min / median) | range RMSE max (mm) | point count diff max (%) "
+        "| waveform L2 max | refined share of lit pixels, max |"
     )
-    say("|---|---|---|---|---|---|---|")
+    say("|---|---|---|---|---|---|---|---|---|")
     for s in fig["summary"]:
         say(
             f"| {s['preset']} | {s['time_s'] * 1e3:.0f} / {s['hits_s'] * 1e3:.0f} / "
-            f"{s['echo_s'] * 1e3:.0f} | {s['speedup_min']:.1f} / {s['speedup_median']:.1f} | "
+            f"{s['echo_s'] * 1e3:.0f} | {s['ray_cast_s'] * 1e3:.0f} "
+            f"({s['ray_cast_s_min'] * 1e3:.0f}-{s['ray_cast_s_max'] * 1e3:.0f}) | "
+            f"{s['time_s'] / s['ray_cast_s']:.1f} | "
+            f"{s['speedup_min']:.1f} / {s['speedup_median']:.1f} | "
             f"{s['range_rmse_m_max'] * 1e3:.2f} | {s['point_count_diff_pct_max']:.2f} | "
             f"{s['waveform_l2_max']:.4f} | {s['refined_share_max']:.0%} |"
         )

@@ -133,6 +133,11 @@ class TargetMesh:
         return normals
 
     @cached_property
+    def radius_m(self) -> float:
+        """Radius of the bounding sphere about the target origin [m] (every vertex)."""
+        return float(np.linalg.norm(self.vertices_m, axis=1).max())
+
+    @cached_property
     def extents_m(self) -> np.ndarray:
         """(3,) size of the axis-aligned bounding box of the faces [m]."""
         return np.ptp(_bounds(self.vertices_m, self.faces), axis=0)
@@ -238,8 +243,9 @@ class TargetModel:
 
     @property
     def radius_m(self) -> float:
-        """Radius of the bounding sphere about the target origin [m]."""
-        return float(np.linalg.norm(self.vertices_m, axis=1).max())
+        """Radius of the bounding sphere about the target origin [m] (computed once per mesh:
+        the background stage asks for it every frame)."""
+        return self.surface.radius_m
 
 
 def builtin_targets() -> list[str]:

@@ -9,23 +9,17 @@ import io
 
 import numpy as np
 import pytest
-from support.app_helpers import settle
+from support.app_helpers import small_app
 
 import simcore
-from app.engine import Engine
 from app.logic import exports
-from app.main import LmapdApp
 from simcore import io as simcore_io
 
 
 @pytest.fixture(scope="module")
 def app():
-    scene = simcore.with_overrides(simcore.load_scene(), {"pixels": 48, "fidelity.subrays": 1})
-    lmapd = LmapdApp(scene, engine=Engine(scene), flow_control=False, debounce_s=0.0)
-    lmapd.state.ready()
-    settle(lmapd)
-    yield lmapd
-    lmapd.logic.runner.close()
+    with small_app() as lmapd:
+        yield lmapd
 
 
 @pytest.mark.parametrize("fmt", ["ply", "las"])

@@ -6,21 +6,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from support.app_helpers import change, settle
-
-import simcore
-from app.engine import Engine
-from app.main import LmapdApp
+from support.app_helpers import change, small_app
 
 
 @pytest.fixture(scope="module")
 def app():
-    scene = simcore.with_overrides(simcore.load_scene(), {"pixels": 48, "fidelity.subrays": 1})
-    lmapd = LmapdApp(scene, engine=Engine(scene), flow_control=False, debounce_s=0.0)
-    lmapd.state.ready()
-    settle(lmapd)
-    yield lmapd
-    lmapd.logic.runner.close()
+    with small_app() as lmapd:
+        yield lmapd
 
 
 def stat(app, label: str) -> str:

@@ -8,23 +8,15 @@ import math
 
 import pytest
 import trimesh
-from support.app_helpers import settle
+from support.app_helpers import settle, small_app
 
-import simcore
-from app.engine import Engine
-from app.main import LmapdApp
 from simcore.target import builtin_targets
 
 
 @pytest.fixture(scope="module")
 def app():
-    scene = simcore.with_overrides(simcore.load_scene(), {"pixels": 48, "fidelity.subrays": 1})
-    lmapd = LmapdApp(scene, engine=Engine(scene), flow_control=False, debounce_s=0.0)
-    lmapd.state.ready()
-    settle(lmapd)
-    yield lmapd
-    lmapd.logic.runner.close()
-    lmapd.uploads.files.cleanup()
+    with small_app() as lmapd:
+        yield lmapd
 
 
 def box_stl() -> bytes:

@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
 import time
+from collections.abc import Iterator
 
 from hypothesis import strategies as st
 
+import simcore
+from app.engine import Engine
 from app.main import LmapdApp
 
 # any value a page (or a hostile client) might send for a state variable
@@ -35,3 +39,20 @@ def change(app: LmapdApp, wait_busy: bool = True, **values) -> None:
         settle(app)
     else:
         assert app.logic.runner.wait_idle(30)
+
+
+@contextlib.contextmanager
+def small_app(pixels: int = 48, model=None) -> Iterator[LmapdApp]:
+    """An app on the paper scene at ``pixels`` x ``pixels`` with one ray per pixel, its state
+    ready, frames applied at once (no page to pace them); closed and its uploads removed after.
+    ``model``: an already loaded target to share (else the paper scene's is loaded)."""
+    scene = simcore.with_overrides(simcore.load_scene(), {"pixels": pixels, "fidelity.subrays": 1})
+    engine = Engine(scene) if model is None else Engine(scene, model=model)
+    app = LmapdApp(scene, engine=engine, flow_control=False, debounce_s=0.0)
+    app.state.ready()  # fires the change handlers once, like a server start
+    settle(app)
+    try:
+        yield app
+    finally:
+        app.logic.runner.close()
+        app.uploads.files.cleanup()

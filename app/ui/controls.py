@@ -363,8 +363,9 @@ def drawer_content() -> None:
         section("Download (the frame shown)")
         downloads()
         html.Div(
-            "3D views: drag to rotate, scroll or right-drag to zoom, middle- or Alt-drag to "
-            "pan; the camera icon resets the view. Sliders update the views while you drag; "
+            "3D views: drag to rotate, right-drag (or Ctrl + wheel, or click the view, then "
+            "wheel) to zoom, middle- or Alt-drag to pan; the wheel alone scrolls the page. The "
+            "camera icon resets the view. Sliders update the views while you drag; "
             "number fields apply on Enter, and values outside a range are clamped with a "
             "message.",
             classes="text-caption help-text mt-3",

@@ -79,6 +79,35 @@ A11Y_SCRIPT = """
 })();
 """
 
+# The 3D views do not capture the page's scroll: the mouse wheel over a view scrolls the page
+# unless Ctrl (or Cmd, or a trackpad pinch) is held or the view was clicked (until the pointer
+# leaves it); a wheel event meant for the page never reaches vtk.js's interactor. A view clicked
+# or tapped is "active" (a thin blue frame), and only then does a finger swipe over it rotate it.
+VIEW_SCROLL_SCRIPT = """
+(() => {
+  const viewOf = (e) => (e.target && e.target.closest ? e.target.closest('.vtk-box') : null);
+  document.addEventListener('pointerdown', (e) => {
+    const box = viewOf(e);
+    document.querySelectorAll('.vtk-box.view-active').forEach((b) => {
+      if (b !== box) b.classList.remove('view-active');
+    });
+    if (box) box.classList.add('view-active');
+  }, true);
+  document.addEventListener('pointerout', (e) => {
+    const box = viewOf(e);
+    if (box && e.pointerType === 'mouse' && !box.contains(e.relatedTarget)) {
+      box.classList.remove('view-active');
+    }
+  }, true);
+  document.addEventListener('wheel', (e) => {
+    const box = viewOf(e);
+    if (box && !e.ctrlKey && !e.metaKey && !box.classList.contains('view-active')) {
+      e.stopPropagation();  // vtk.js never sees it: the page scrolls
+    }
+  }, { capture: true, passive: true });
+})();
+"""
+
 # Shared links (app.logic.links): a page opened with settings in its query string hands them to
 # the server once; ``url`` makes the link of the current settings, with this page's token.
 LINK_SCRIPT = """
@@ -118,7 +147,7 @@ html { overflow-y: auto; }
 .view-card { height: 100%; display: flex; flex-direction: column; }
 .card-title { font-size: 0.98rem !important; padding: 6px 12px 2px 16px !important; }
 .hint { color: #616161; }
-.vtk-box { position: relative; flex: 1 1 auto; min-height: 300px; height: 38vh;
+.vtk-box { position: relative; flex: 1 1 auto; min-height: 240px; height: clamp(240px, 38vh, 560px);
   margin: 4px 8px 8px 8px; border-radius: 4px; overflow: hidden; }
 .overlay { position: absolute; pointer-events: none; color: #eceff1; font-size: 12px;
   background: rgba(20, 22, 28, 0.72); border-radius: 4px; padding: 6px 8px; line-height: 1.45; }
@@ -147,7 +176,7 @@ html { overflow-y: auto; }
   border-radius: 50%; transform: translate(-50%, -50%); pointer-events: none;
   box-shadow: 0 0 0 1px rgba(255,255,255,0.85); }
 .chart-box { position: relative; margin: 0 8px 8px 8px; }
-.waveform-box { height: 37vh; min-height: 300px; }
+.waveform-box { height: clamp(280px, 37vh, 520px); }
 .snr-box { height: 120px; }
 .chart-box .js-plotly-plot, .chart-box .plot-container { height: 100%; }
 .stats-table td { height: 22px !important; font-size: 0.78rem; padding: 0 6px !important; }
@@ -155,6 +184,19 @@ html { overflow-y: auto; }
 .subtitle { color: #616161; }
 .app-title { font-weight: 600; letter-spacing: 0.02em; }
 .footer-text { font-size: 12px; color: #616161; }
+.stats-grid { display: grid; grid-template-columns: repeat(auto-fit, minmax(220px, 1fr));
+  column-gap: 8px; padding: 0 8px; }
+.image-kind { flex-wrap: wrap; height: auto !important; }
+@media (max-width: 600px) {
+  .overlay { font-size: 10px; padding: 4px 6px; }
+  .colorbar-overlay { min-width: 150px; }
+  .legend-count { padding-left: 4px; }
+}
+/* the 3D views leave the page's scroll alone (VIEW_SCROLL_SCRIPT): until a view is clicked or
+   tapped, a finger swipe over it scrolls the page (vtk.js sets touch-action: none inline) */
+.vtk-box:not(.view-active) div, .vtk-box:not(.view-active) canvas {
+  touch-action: pan-y !important; }
+.vtk-box.view-active { box-shadow: 0 0 0 2px #64b5f6; }
 .busy-bar { position: absolute; left: 0; right: 0; bottom: 0; height: 3px; background: #ffd54f; }
 """
 
@@ -229,16 +271,17 @@ def views_grid() -> None:
             with v3.VCol(cols=12, lg=6):
                 views3d.cloud_card()
         with v3.VRow(dense=True):
-            with v3.VCol(cols=12, md=6, lg=3):
+            with v3.VCol(cols=12, md=5, lg=4, xl=3):
                 panels.array_card()
-            with v3.VCol(cols=12, md=6, lg=5):
+            with v3.VCol(cols=12, md=7, lg=8, xl=5):
                 panels.waveform_card()
-            with v3.VCol(cols=12, md=12, lg=4):
+            with v3.VCol(cols=12, xl=4):
                 panels.stats_card()
+        footer()
 
 
 def footer() -> None:
-    with v3.VFooter(app=True, border=True, classes="py-1"):
+    with v3.VFooter(border=True, classes="py-1 mt-2 flex-wrap page-footer"):
         html.Span("{{ credit }}", classes="footer-text nasa-credit")
         v3.VSpacer()
         html.Span(
@@ -249,20 +292,23 @@ def footer() -> None:
 
 def build_layout(server) -> VAppLayout:
     """Build the page on ``server`` (state and triggers are set up by app.logic.controller)."""
-    server.state.setdefault("main_drawer", True)
+    # the drawer's state is each page's own: open beside the views on a wide screen, closed on a
+    # narrow one (below the md breakpoint, 960 px, it opens over the views and closes on a tap
+    # outside: Vuetify's temporary drawer)
+    server.state.client_only("main_drawer")
     with VAppLayout(server, full_height=True) as layout:
         client.Style(CSS)
         client.Script(FRAME_SCRIPT)  # before the watcher below: created first
         client.Script(A11Y_SCRIPT)
         client.Script(LINK_SCRIPT)
+        client.Script(VIEW_SCROLL_SCRIPT)
         client.ClientStateChange(value="frame_key", change=FRAME_SHOWN, trigger_on_create=True)
         app_bar()
         with v3.VNavigationDrawer(
-            v_model=("main_drawer",), width=330, permanent=True, location="left"
+            v_model=("main_drawer", None), width=330, mobile_breakpoint="md", location="left"
         ):
             controls.drawer_content()
         with v3.VMain():
             views_grid()
-        footer()
     layout.title = "lmapd-sim"
     return layout

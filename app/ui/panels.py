@@ -103,10 +103,10 @@ def stats_card() -> None:
     with v3.VCard(classes="view-card stats-card", elevation=1):
         with v3.VCardTitle(classes="card-title"):
             html.Span("Statistics of this flash")
-        with v3.VRow(no_gutters=True, classes="px-2"):
-            with v3.VCol(cols=7):
+        with html.Div(classes="stats-grid"):  # side by side where the card is wide enough
+            with html.Div():
                 _table("stats", "row.label", "{{ row.label }}", "{{ row.value }}", "stat-value")
-            with v3.VCol(cols=5):
+            with html.Div():
                 html.Div("Time per stage (ms)", classes="subtitle text-caption px-2")
                 _table(
                     "stages",

@@ -4,7 +4,8 @@ The parent of one child per feature, which it calls (they never call it; where a
 for a new frame, the parent hands it a callback): the controls (``ControlPanel``: sanitised,
 corrections written back), the pixel selection (``PixelSelection``), the frame pacing
 (``FramePacer``: no more frames than the page draws), the fly-around (``FlyaroundLogic``), the
-uploaded targets (``TargetUploads``) and the lessons (``LessonGuide``). A valid scene goes to the
+uploaded targets (``TargetUploads``), the lessons (``LessonGuide``) and the pinned frame
+(``FrameCompare``). A valid scene goes to the
 runner, which computes in its worker thread; finished frames come back through the event loop and
 are applied only if they are still the newest generation.
 """
@@ -21,6 +22,7 @@ import numpy as np
 import simcore
 from app.engine import Engine, Frame, Request
 from app.logic import exports
+from app.logic.compare import FrameCompare
 from app.logic.controls import ControlPanel
 from app.logic.flyaround import FlyaroundLogic
 from app.logic.lessons import LessonGuide
@@ -92,6 +94,9 @@ class AppLogic:
             use_target=self.use_target,
         )
         self.lessons = LessonGuide(self.state)  # one-click scenes with a card (their own state)
+        self.compare = FrameCompare(self.state)  # a pinned frame beside the new one
+        server.trigger("pin_frame")(self.pin_frame)
+        server.trigger("unpin_frame")(self.compare.unpin)
         server.trigger("pixel_click")(self.on_pixel_click)
         server.trigger("frame_shown")(self.on_frame_shown)
         server.trigger("reset_controls")(self.reset_controls)
@@ -194,6 +199,7 @@ class AppLogic:
         self.engine = engine
         self.panel.use_target(initial_controls)
         self._applied_faces_key = None  # its facets are drawn anew with the next frame
+        self.compare.unpin()  # the pinned cloud was drawn in the old target's frame
         model = engine.model
         geometry = engine.target_geometry()
         with self.state:
@@ -281,6 +287,13 @@ class AppLogic:
         except exports.ExportError as exc:
             self.state.error_message = f"Download: {exc}"
             return None
+
+    def pin_frame(self, *_: Any, **__: Any) -> None:
+        """Pin the frame shown: its figures and cloud stay beside the frames that follow."""
+        if self.last_frame is None:
+            self.state.error_message = "Pin: no frame yet"
+            return
+        self.compare.pin(self.last_frame, self.engine.frame)
 
     def reset_controls(self, *_: Any, **__: Any) -> None:
         """Back to the scene the app started with (the paper scene unless --scene was given)."""
@@ -373,6 +386,7 @@ class AppLogic:
             "error_message": "",
             "frame_key": key,
             "frame_generation": outcome.generation,
+            **self.compare.for_frame(frame),
         }
         if frame.faces_key != self._applied_faces_key:
             update["seen_facets"] = frame.seen_facets

@@ -7,7 +7,14 @@ import numpy as np
 import simcore
 from app.payloads import encode
 from app.payloads.scene3d import DisplayFrame
-from app.payloads.style import OUTLIER_COLOR, RANGE_CMAP, SNR_CMAP, TARGET_POINT_COLOR, colorbar
+from app.payloads.style import (
+    OUTLIER_COLOR,
+    PINNED_POINT_COLOR,
+    RANGE_CMAP,
+    SNR_CMAP,
+    TARGET_POINT_COLOR,
+    colorbar,
+)
 
 
 def points_mesh(points_d: np.ndarray, rgb: np.ndarray) -> dict:
@@ -61,3 +68,12 @@ def cloud_view(result: simcore.Result, frame: DisplayFrame, color_by: str) -> di
         "n_outliers": int(outlier.sum()),
         "colorbar": bar,
     }
+
+
+def pinned_cloud(result: simcore.Result, frame: DisplayFrame) -> dict:
+    """Every point of ``result`` (target points and outliers), (n, 3) in the display frame [m],
+    in one pale colour: a pinned frame's cloud, which the view draws faintly under the new one."""
+    pose = result.hits.pose
+    points_d = frame.from_sensor(result.points, pose.rotation, pose.translation_m)
+    rgb = np.tile(np.array(encode.rgb_of(PINNED_POINT_COLOR), np.uint8), (len(points_d), 1))
+    return points_mesh(points_d, rgb)

@@ -17,6 +17,7 @@ OTHER_MATERIAL_COLOR = "#ff8a65"
 HIDDEN_COLOR = "#4a4d55"
 TARGET_POINT_COLOR = "#4fc3f7"
 OUTLIER_COLOR = "#ff1744"
+PINNED_POINT_COLOR = "#cfd8dc"  # a pinned frame's cloud, drawn faintly (app.logic.compare)
 RANGE_CMAP = "viridis"
 SNR_CMAP = "viridis"
 POWER_CMAP = "inferno"

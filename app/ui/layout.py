@@ -162,6 +162,7 @@ html { overflow-y: auto; }
 .swatch-line { height: 2px; border: none; background: #ff6b40; }
 .swatch-target { background: #4fc3f7; }
 .swatch-outlier { background: #ff1744; }
+.swatch-pinned { background: rgba(207, 216, 220, 0.5); }
 .credit-overlay { position: absolute; right: 8px; bottom: 6px; color: #cfd8dc; font-size: 11px;
   pointer-events: none; text-shadow: 0 0 3px #000; }
 .colorbar-title { font-size: 12px; }

@@ -6,6 +6,7 @@ from __future__ import annotations
 from trame.widgets import html, plotly
 from trame.widgets import vuetify3 as v3
 
+from app.ui import compare
 from app.ui.widgets import button_toggle
 
 # Pixel (row, col) under the mouse from the click position on the n x n image.
@@ -101,8 +102,11 @@ def _table(rows: str, key: str, label: str, value: str, value_class: str) -> Non
 
 def stats_card() -> None:
     with v3.VCard(classes="view-card stats-card", elevation=1):
-        with v3.VCardTitle(classes="card-title"):
+        with v3.VCardTitle(classes="card-title d-flex align-center flex-wrap ga-2"):
             html.Span("Statistics of this flash")
+            v3.VSpacer()
+            compare.pin_button()
+        compare.compare_table()
         with html.Div(classes="stats-grid"):  # side by side where the card is wide enough
             with html.Div():
                 _table("stats", "row.label", "{{ row.label }}", "{{ row.value }}", "stat-value")

@@ -110,6 +110,12 @@ def cloud_card() -> None:
                     actor=("{ visibility: !!cloud_outliers && n_outliers > 0 }",),
                 ):
                     vtkw.VtkMesh("cloud_outliers", state=("cloud_outliers",))
+                with vtkw.VtkGeometryRepresentation(  # a pinned frame (app.logic.compare)
+                    id="pinned",
+                    property=("{ pointSize: 2, lighting: false, opacity: 0.35 }",),
+                    actor=("{ visibility: !!pinned_cloud && n_pinned_points > 0 }",),
+                ):
+                    vtkw.VtkMesh("pinned_cloud", state=("pinned_cloud",))
             _cloud_legend()
 
 
@@ -127,3 +133,6 @@ def _cloud_legend() -> None:
         with html.Div(classes="legend-row"):
             html.Span(classes="swatch swatch-outlier")
             html.Span("outliers (false alarms): {{ n_outliers.toLocaleString() }}")
+        with html.Div(v_if="pinned", classes="legend-row pinned-legend"):
+            html.Span(classes="swatch swatch-pinned")
+            html.Span("pinned frame (faint): {{ n_pinned_points.toLocaleString() }}")

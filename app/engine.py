@@ -28,6 +28,8 @@ class Request:
     image_kind: str = "range"
     selection: tuple[tuple[int, int], ...] = ()
     selection_pixels: int = 0  # array size the selection refers to (0: none yet)
+    # the selection's directions as focal-plane tangents (x/f, y/f); () : its pixels' centres
+    selection_tangents: tuple[tuple[float, float], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -121,9 +123,13 @@ class Engine:
 
     @staticmethod
     def selection_for(result: simcore.Result, request: Request) -> list[list[int]]:
-        """The request's selected pixels on this result's array (rescaled if the array size
-        changed), or the default pixel when nothing is selected yet."""
+        """The request's selected pixels on this result's array (the pixels that see their
+        directions, if the array changed), or the default pixel when nothing is selected yet."""
         n = result.pixels
+        if request.selection_tangents:
+            return waveforms.pixels_of_tangents(
+                request.selection_tangents, n, result.scene.receive.fov_rad
+            )
         if request.selection and request.selection_pixels:
             chosen = waveforms.rescale_selection(
                 list(request.selection), request.selection_pixels, n

@@ -98,6 +98,7 @@ class AppLogic:
         server.trigger("pin_frame")(self.pin_frame)
         server.trigger("unpin_frame")(self.compare.unpin)
         server.trigger("pixel_click")(self.on_pixel_click)
+        server.trigger("pixel_hover")(lambda *a, **_: self.selection.hover(self.last_frame, *a[:2]))
         server.trigger("frame_shown")(self.on_frame_shown)
         server.trigger("reset_controls")(self.reset_controls)
         server.trigger("open_link")(self.open_link)
@@ -149,6 +150,7 @@ class AppLogic:
                 "legend": [],
                 "array_image": {"src": "", "colorbar": None, "pixels": 0},
                 "selected_pixels": [],
+                "pixel_readout": None,
                 "selection_colors": list(style.SELECTION_COLORS),
                 "waveforms": {"data": [], "layout": {}},
                 "snr_hist": {"data": [], "layout": {}},
@@ -185,6 +187,7 @@ class AppLogic:
             image_kind=self.controls.image_kind,
             selection=self.selection.current(),
             selection_pixels=self.selection.array_pixels,
+            selection_tangents=self.selection.tangents(),
         )
         self.state.busy = True
         return self.runner.submit(request)
@@ -393,7 +396,7 @@ class AppLogic:
             self._applied_faces_key = frame.faces_key
         self.last_frame = frame
         self._pushed_generation = outcome.generation
-        self.selection.shown(frame)
+        self.selection.shown(frame, selection)
         self.pacer.sent(key)  # anything still waiting is older than this frame
         self.n_frames_pushed += 1
         with self.state:

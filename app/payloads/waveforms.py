@@ -26,16 +26,32 @@ def default_pixel(result: simcore.Result) -> list[int] | None:
 
 
 def rescale_selection(pixels: list, n_from: int, n_to: int) -> list[list[int]]:
-    """Selected (row, col) pixels of an n_from array mapped to the same spots of an n_to array."""
+    """Selected (row, col) pixels of an n_from array mapped to the same spots of an n_to array
+    (the pixels that hold their centres' directions, for one field of view)."""
     if n_from == n_to:
         return [[int(r), int(c)] for r, c in pixels]
+    return pixels_of_tangents(pixel_tangents(pixels, n_from, 1.0), n_to, 1.0)
+
+
+def pixel_tangents(pixels, n: int, fov_rad: float) -> tuple[tuple[float, float], ...]:
+    """The focal-plane tangents (x/f, y/f) of the centres of (row, col) pixels of an n x n array
+    of full field of view ``fov_rad`` [rad] (the grid of ``simcore.geometry.subray_tangents``)."""
+    pitch = 2.0 * math.tan(fov_rad / 2.0) / n
+    return tuple(
+        ((int(c) - (n - 1) / 2.0) * pitch, (int(r) - (n - 1) / 2.0) * pitch) for r, c in pixels
+    )
+
+
+def pixels_of_tangents(tangents, n: int, fov_rad: float) -> list[list[int]]:
+    """The (row, col) pixels of an n x n array of field of view ``fov_rad`` [rad] that see the
+    directions of focal-plane tangents (x/f, y/f), in order, each once; directions outside the
+    field of view have none."""
+    pitch = 2.0 * math.tan(fov_rad / 2.0) / n
     out: list[list[int]] = []
-    for r, c in pixels:
-        rc = [
-            min(n_to - 1, int((r + 0.5) * n_to / n_from)),
-            min(n_to - 1, int((c + 0.5) * n_to / n_from)),
-        ]
-        if rc not in out:
+    for tx, ty in tangents:
+        # (a centre on a boundary of the new grid, 64 -> 256 say, goes to the larger index)
+        rc = [math.floor(ty / pitch + n / 2.0 + 1e-9), math.floor(tx / pitch + n / 2.0 + 1e-9)]
+        if 0 <= rc[0] < n and 0 <= rc[1] < n and rc not in out:
             out.append(rc)
     return out
 

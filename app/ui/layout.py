@@ -170,7 +170,10 @@ html { overflow-y: auto; }
 .colorbar-labels { display: flex; justify-content: space-between; font-size: 11px;
   font-variant-numeric: tabular-nums; }
 .array-box { position: relative; width: min(100% - 16px, 33vh); aspect-ratio: 1 / 1;
-  margin: 4px auto 6px auto; background: #1e1e24; }
+  margin: 4px auto 6px auto; background: #1e1e24; overflow: hidden; }
+.array-box:focus-visible { outline: 3px solid #ffb300; outline-offset: 2px; }
+.array-zoom { position: absolute; inset: 0; transform-origin: 0 0; }
+.pixel-readout { min-height: 1.4em; font-variant-numeric: tabular-nums; }
 .array-image { width: 100%; height: 100%; display: block; image-rendering: pixelated;
   cursor: crosshair; user-select: none; }
 .pixel-marker { position: absolute; width: 14px; height: 14px; border: 2px solid;

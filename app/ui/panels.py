@@ -7,20 +7,92 @@ from trame.widgets import html, plotly
 from trame.widgets import vuetify3 as v3
 
 from app.ui import compare
-from app.ui.widgets import button_toggle
+from app.ui.widgets import button_toggle, html_attributes
 
-# Pixel (row, col) under the mouse from the click position on the n x n image.
+# The image's zoom lives in the page (client-only state ``array_zoom``: scale s in [1, 16], the
+# visible window's top-left corner x, y in fractions of the image). ZOOM(z, f, u, v): zoom by f
+# about the point at fractions (u, v) of the box, which stays put.
+ZOOM = (
+    "((z, f, u, v) => { const s = Math.min(16, Math.max(1, z.s * f)), m = 1 - 1 / s; "
+    "return { s: s, x: Math.min(m, Math.max(0, z.x + u / z.s - u / s)), "
+    "y: Math.min(m, Math.max(0, z.y + v / z.s - v / s)) }; })"
+)
+# The (row, col) under the pointer, from its place in the (unzoomed) box and the zoom.
+PIXEL_AT = (
+    "((e, z, n) => { const r = e.currentTarget.closest('.array-box').getBoundingClientRect(); "
+    "return [Math.floor((z.y + (e.clientY - r.top) / r.height / z.s) * n), "
+    "Math.floor((z.x + (e.clientX - r.left) / r.width / z.s) * n)]; })"
+    "($event, array_zoom, array_image.pixels)"
+)
+# A click selects the pixel (shift-click adds), unless it ended a drag.
 PIXEL_CLICK = (
-    "trigger('pixel_click', ["
-    "Math.floor($event.offsetY / $event.currentTarget.clientHeight * array_image.pixels), "
-    "Math.floor($event.offsetX / $event.currentTarget.clientWidth * array_image.pixels), "
-    "$event.shiftKey])"
+    "$event.currentTarget.closest('.array-box').dataset.dragged !== '1' && "
+    f"trigger('pixel_click', {PIXEL_AT}.concat([$event.shiftKey]))"
+)
+# The pointer's pixel goes to the server for its readout when it changes, at most every 50 ms
+# (and once more 60 ms after the last move, so the readout ends on the pixel under the pointer).
+PIXEL_HOVER = (
+    f"((p, el, w) => {{ const send = () => {{ if (el.dataset.hover !== p.join()) {{ "
+    "el.dataset.hover = p.join(); el.dataset.t = Date.now(); trigger('pixel_hover', p); } }; "
+    "w.clearTimeout(+el.dataset.timer); "
+    "if (Date.now() - (+el.dataset.t || 0) > 50) send(); "
+    "else el.dataset.timer = w.setTimeout(send, 60); })"
+    f"({PIXEL_AT}, $event.currentTarget, $event.view)"
+)
+HOVER_END = "$event.currentTarget.dataset.hover = ''; trigger('pixel_hover', [])"
+WHEEL = (
+    "$event.preventDefault(); array_zoom = ((e, r) => "
+    f"{ZOOM}(array_zoom, e.deltaY < 0 ? 1.25 : 0.8, "
+    "(e.clientX - r.left) / r.width, (e.clientY - r.top) / r.height))"
+    "($event, $event.currentTarget.getBoundingClientRect())"
+)
+# Drag pans (when zoomed); a drag's last mouse-up is not a click.
+DRAG_START = (
+    "$event.currentTarget.dataset.drag = [$event.clientX, $event.clientY, array_zoom.x, "
+    "array_zoom.y].join(); $event.currentTarget.dataset.dragged = '0'"
+)
+DRAG = (
+    "((e, el, z) => { if (!(e.buttons & 1) || !el.dataset.drag || z.s <= 1) return; "
+    "const d = el.dataset.drag.split(',').map(Number), r = el.getBoundingClientRect(), "
+    "m = 1 - 1 / z.s, dx = e.clientX - d[0], dy = e.clientY - d[1]; "
+    "if (Math.abs(dx) + Math.abs(dy) > 4) el.dataset.dragged = '1'; "
+    "array_zoom = { s: z.s, x: Math.min(m, Math.max(0, d[2] - dx / r.width / z.s)), "
+    "y: Math.min(m, Math.max(0, d[3] - dy / r.height / z.s)) }; })"
+    "($event, $event.currentTarget, array_zoom)"
+)
+DRAG_END = "$event.currentTarget.dataset.drag = ''"
+# Keys on the focused image: arrows pan, + and - zoom about the centre, 0 resets.
+KEYS = (
+    "array_zoom = ((e, z) => { const d = 0.2 / z.s, m = 1 - 1 / z.s, "
+    "c = (v) => Math.min(m, Math.max(0, v)), "
+    "moves = { ArrowLeft: [-d, 0], ArrowRight: [d, 0], ArrowUp: [0, -d], ArrowDown: [0, d] }; "
+    "if (moves[e.key]) { e.preventDefault(); "
+    "return { s: z.s, x: c(z.x + moves[e.key][0]), y: c(z.y + moves[e.key][1]) }; } "
+    f"if (e.key === '+' || e.key === '=') return {ZOOM}(z, 1.5, 0.5, 0.5); "
+    f"if (e.key === '-' || e.key === '_') return {ZOOM}(z, 1 / 1.5, 0.5, 0.5); "
+    "if (e.key === '0') return { s: 1, x: 0, y: 0 }; return z; })($event, array_zoom)"
+)
+ZOOM_STYLE = (
+    "{ transform: 'scale(' + array_zoom.s + ') translate(' + (-100 * array_zoom.x) + '%, ' "
+    "+ (-100 * array_zoom.y) + '%)' }",
 )
 MARKER_STYLE = (
     "{ left: ((p[1] + 0.5) / array_image.pixels * 100) + '%', "
     "top: ((p[0] + 0.5) / array_image.pixels * 100) + '%', "
+    "transform: 'translate(-50%, -50%) scale(' + (1 / array_zoom.s) + ')', "
     "borderColor: selection_colors[i % selection_colors.length] }"
 )
+
+
+def _zoom_button(icon: str, label: str, action: str) -> None:
+    v3.VBtn(
+        icon=icon,
+        size="x-small",
+        variant="text",
+        title=label,
+        click=action,
+        **html_attributes(aria_label=label),
+    )
 
 
 def array_card() -> None:
@@ -34,30 +106,69 @@ def array_card() -> None:
                     ("Range", "range", ""),
                     ("Peak power", "peak_power", ""),
                     ("Background", "background", "image-background"),
+                    ("Multi-peak", "multi_peak", "image-multi-peak"),
                 ],
                 size="x-small",
                 classes="image-kind",
                 label="Array image shows",
             )
-        html.Div(
-            "Click a pixel to see its echo; shift-click adds more.",
-            classes="hint text-caption px-4",
-        )
-        with html.Div(classes="array-box"):
-            html.Img(
-                src=("array_image.src",),
-                v_show="array_image.src",
-                classes="array-image",
-                draggable="false",
-                alt="detector array image",
-                click=PIXEL_CLICK,
-            )
+        with html.Div(classes="d-flex align-center px-4"):
             html.Div(
-                v_for="(p, i) in selected_pixels",
-                key="i",
-                classes="pixel-marker",
-                style=(MARKER_STYLE,),
+                "Click a pixel to see its echo; shift-click adds more. Wheel, drag, arrows, "
+                "+ / − zoom and pan.",
+                classes="hint text-caption",
             )
+            v3.VSpacer()
+            _zoom_button(
+                "mdi-magnify-plus-outline",
+                "Zoom in",
+                f"array_zoom = {ZOOM}(array_zoom, 1.5, 0.5, 0.5)",
+            )
+            _zoom_button(
+                "mdi-magnify-minus-outline",
+                "Zoom out",
+                f"array_zoom = {ZOOM}(array_zoom, 1 / 1.5, 0.5, 0.5)",
+            )
+            _zoom_button(
+                "mdi-fit-to-screen-outline", "Reset zoom", "array_zoom = { s: 1, x: 0, y: 0 }"
+            )
+        with html.Div(
+            classes="array-box",
+            tabindex="0",
+            wheel=WHEEL,
+            mousedown=DRAG_START,
+            mousemove=DRAG,
+            mouseup=DRAG_END,
+            mouseleave=DRAG_END,
+            keydown=KEYS,
+            **html_attributes(
+                role="group",
+                aria_label="Detector array image: arrow keys pan, plus and minus zoom, 0 resets",
+            ),
+        ):
+            with html.Div(classes="array-zoom", style=ZOOM_STYLE):
+                html.Img(
+                    src=("array_image.src",),
+                    v_show="array_image.src",
+                    classes="array-image",
+                    draggable="false",
+                    alt="detector array image",
+                    click=PIXEL_CLICK,
+                    mousemove=PIXEL_HOVER,
+                    mouseleave=HOVER_END,
+                )
+                html.Div(
+                    v_for="(p, i) in selected_pixels",
+                    key="i",
+                    classes="pixel-marker",
+                    style=(MARKER_STYLE,),
+                )
+        html.Div(
+            "{{ pixel_readout ? pixel_readout.text : "
+            "'Point at a pixel for its range, SNR and echo peaks' }}",
+            classes="pixel-readout text-caption px-4",
+            **html_attributes(aria_live="polite"),
+        )
         with html.Div(v_if="array_image.colorbar", classes="colorbar px-4 pb-2"):
             html.Div(
                 "{{ array_image.colorbar.title }} (dark: no echo / not detected)",

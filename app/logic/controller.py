@@ -28,6 +28,7 @@ from app.logic.flyaround import FlyaroundLogic
 from app.logic.lessons import LessonGuide
 from app.logic.links import controls_from_link, link_query
 from app.logic.pacing import FramePacer
+from app.logic.parts import PartHighlight
 from app.logic.scene_map import resolved_materials, scene_from_controls
 from app.logic.selection import PixelSelection
 from app.logic.upload import LoadedTarget, TargetUploads
@@ -97,6 +98,7 @@ class AppLogic:
         self.compare = FrameCompare(self.state)  # a pinned frame beside the new one
         server.trigger("pin_frame")(self.pin_frame)
         server.trigger("unpin_frame")(self.compare.unpin)
+        self.parts = PartHighlight(self.state, lambda: self.engine.model)  # in the 3D scene
         server.trigger("pixel_click")(self.on_pixel_click)
         server.trigger("pixel_hover")(lambda *a, **_: self.selection.hover(self.last_frame, *a[:2]))
         server.trigger("frame_shown")(self.on_frame_shown)
@@ -140,6 +142,7 @@ class AppLogic:
                 "target_polys": geometry["polys"],
                 "seen_facets": None,
                 "home_camera": self.engine.home_camera(),
+                "scene_camera": None,
                 "frustum": None,
                 "footprint_text": "",
                 "cloud_points": None,
@@ -217,8 +220,10 @@ class AppLogic:
                     "target_polys": geometry["polys"],
                     "seen_facets": None,
                     "home_camera": engine.home_camera(),
+                    "scene_camera": None,
                 }
             )
+        self.parts.reset()
         self.on_controls_change()
 
     def fit_field_of_view(self, *_: Any, **__: Any) -> None:
@@ -391,6 +396,11 @@ class AppLogic:
             "frame_generation": outcome.generation,
             **self.compare.for_frame(frame),
         }
+        # the scene view frames the field of view as well as the target: anew when its scale moves
+        camera = scene3d.scene_camera(frame.result.scene, self.engine.frame.radius_m)
+        reframe = camera != self.state.scene_camera
+        if reframe:
+            update["scene_camera"] = camera
         if frame.faces_key != self._applied_faces_key:
             update["seen_facets"] = frame.seen_facets
             self._applied_faces_key = frame.faces_key
@@ -403,6 +413,8 @@ class AppLogic:
             self.state.update(update)
             # busy while a newer request than this frame's is under way (or a frame is held)
             self.state.busy = not self.runner.is_current(outcome.generation)
+        if reframe:
+            self.server.js_call("scene_view", "resetCamera")
 
     # -- pixel selection --------------------------------------------------------------------------
     def on_pixel_click(

@@ -61,6 +61,26 @@ def home_camera(
     }
 
 
+def view_radius_m(scene: simcore.Scene, radius_m: float) -> float:
+    """The radius [m] the 3D scene frames: the target's bounding radius, or, where the field of
+    view's footprint at the target reaches further (its half diagonal: beyond 390 m for the MRO
+    in the paper's 1.72 deg), the target radius times the power of sqrt(2) that holds the
+    footprint (so the camera moves only when the scale changes by that much). The frustum is
+    drawn over a depth in proportion, so it keeps its shape at any distance (at 3 km the fixed
+    camera showed it as a line: its 90 m footprint far outside the view, only the boresight
+    inside)."""
+    half_diagonal_m = math.sqrt(2.0) * scene.pose.distance_m * math.tan(scene.receive.fov_rad / 2.0)
+    if half_diagonal_m <= radius_m:
+        return float(radius_m)
+    steps = math.ceil(2.0 * math.log2(half_diagonal_m / radius_m) - 1e-9)
+    return float(radius_m * 2.0 ** (steps / 2.0))
+
+
+def scene_camera(scene: simcore.Scene, radius_m: float) -> dict[str, list[float]]:
+    """The 3D scene view's home camera for ``scene``: it frames :func:`view_radius_m`."""
+    return home_camera(view_radius_m(scene, radius_m))
+
+
 # ----------------------------------------------------------------------------------------------
 # the 3D scene: target mesh, facet colours, frustum, legend
 # ----------------------------------------------------------------------------------------------
@@ -103,6 +123,18 @@ def seen_facets_mesh(
         },
         "field": encode.rgb_field(facet_colors(model, faces), location="CellData"),
     }
+
+
+def part_cells(model: simcore.TargetModel, part: str) -> dict | list:
+    """vtk.js triangle cells of one part's facets, indices into the whole mesh's points (which
+    the page already holds): the highlight of a part sends no points. ``[]`` for no such part."""
+    if part not in model.part_names:
+        return []
+    faces = model.mesh.faces[model.face_part == model.part_names.index(part)]
+    cells = np.column_stack([np.full(len(faces), 3), faces]).ravel()
+    # the mesh's largest point index decides the type, so every part of a target has one dtype
+    wide = len(model.mesh.vertices) >= 2**16
+    return encode.typed_array(cells.astype(np.uint32 if wide else np.uint16))
 
 
 def material_legend(model: simcore.TargetModel, visible_faces: np.ndarray) -> list[dict]:
@@ -167,10 +199,11 @@ def footprint_text(scene: simcore.Scene) -> str:
 
 
 def frustum_mesh(result: simcore.Result, frame: DisplayFrame) -> dict:
-    """vtk.js mesh state of the frustum lines in the display frame."""
+    """vtk.js mesh state of the frustum lines in the display frame, over the depth of
+    :func:`view_radius_m`."""
     scene = result.scene
     points_s, segments = frustum_sensor(
-        scene.receive.fov_rad, scene.pose.distance_m, frame.radius_m
+        scene.receive.fov_rad, scene.pose.distance_m, view_radius_m(scene, frame.radius_m)
     )
     pose = result.hits.pose
     points_d = frame.from_sensor(points_s, pose.rotation, pose.translation_m)

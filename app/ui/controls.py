@@ -174,19 +174,32 @@ def materials_panel() -> None:
         with v3.VExpansionPanel():
             v3.VExpansionPanelTitle("Target materials (per part)", classes="text-body-2")
             with v3.VExpansionPanelText():
-                v3.VSelect(
+                html.Div(
+                    "Point at a part or choose it: the 3D scene shows it in yellow.",
+                    classes="hint text-caption mb-2",
+                )
+                # hovering a part's row or choosing it (focus, a new material) highlights it
+                with html.Div(
                     v_for="part in part_names",
                     key="part",
-                    label=("part",),
-                    hint=("part_info[part] || ''",),
-                    persistent_hint=True,
-                    model_value=("materials[part]",),
-                    update_modelValue="materials = {...materials, [part]: $event}",
-                    items=("material_items",),
-                    density="compact",
-                    variant="outlined",
-                    classes="mb-2 material-select",
-                )
+                    mouseenter="part_hover = part",
+                    mouseleave="part_hover = null",
+                    focusin="part_chosen = part",
+                    classes="material-row",
+                ):
+                    v3.VSelect(
+                        label=("part",),
+                        hint=("part_info[part] || ''",),
+                        persistent_hint=True,
+                        model_value=("materials[part]",),
+                        update_modelValue=(
+                            "materials = {...materials, [part]: $event}; part_chosen = part"
+                        ),
+                        items=("material_items",),
+                        density="compact",
+                        variant="outlined",
+                        classes="mb-2 material-select",
+                    )
 
 
 def display_choices() -> None:

@@ -21,12 +21,12 @@ BACKGROUND_RGB = (26, 28, 35)
 HIDDEN_RGB = [round(c / 255, 3) for c in encode.rgb_of(HIDDEN_COLOR)]
 
 
-def _view(ref: str):
-    """A vtk.js view whose camera resets go to the state's home camera."""
+def _view(ref: str, camera: str = "home_camera"):
+    """A vtk.js view whose camera resets go to the state's ``camera``."""
     return vtkw.VtkView(
         ref=ref,
         background=(BACKGROUND,),
-        reset_camera=f"trame.refs['{ref}'].setCamera(home_camera)",
+        reset_camera=f"trame.refs['{ref}'].setCamera({camera})",
         __events=[("reset_camera", "resetCamera")],
     )
 
@@ -53,7 +53,7 @@ def scene_card() -> None:
     with v3.VCard(classes="view-card scene-card", elevation=1):
         _card_title("3D scene: target and field of view", "scene_view")
         with html.Div(classes="vtk-box scene-box"):
-            with _view("scene_view"):
+            with _view("scene_view", "scene_camera || home_camera"):
                 with vtkw.VtkGeometryRepresentation(
                     id="target",
                     property=(f"{{ color: {HIDDEN_RGB}, ambient: 0.3, diffuse: 0.7 }}",),
@@ -66,6 +66,14 @@ def scene_card() -> None:
                     actor=("{ visibility: !!seen_facets }",),
                 ):
                     vtkw.VtkMesh("seen_facets", state=("seen_facets",))
+                with vtkw.VtkGeometryRepresentation(
+                    id="highlight",
+                    property=("{ color: [1.0, 0.86, 0.1], ambient: 0.5, diffuse: 0.6 }",),
+                    actor=("{ visibility: !!highlight_part }",),
+                ):
+                    vtkw.VtkPolyData(
+                        "highlight", points=("target_points",), polys=("highlight_cells",)
+                    )
                 with vtkw.VtkGeometryRepresentation(
                     id="frustum",
                     property=("{ color: [1.0, 0.42, 0.25], lineWidth: 1.5, lighting: false }",),
@@ -87,6 +95,9 @@ def _material_legend() -> None:
                 "{{ m.seen.toLocaleString() }} / {{ m.total.toLocaleString() }}",
                 classes="legend-count",
             )
+        with html.Div(v_if="highlight_part", classes="legend-row highlight-row"):
+            html.Span(classes="swatch", style="background: #ffdb1a")
+            html.Span("part {{ highlight_part }} (materials panel)", classes="legend-label")
         with html.Div(classes="legend-row"):
             html.Span(classes="swatch swatch-line")
             html.Span("field of view: {{ footprint_text }}", classes="legend-label")

@@ -6,6 +6,7 @@ changes."""
 from __future__ import annotations
 
 import base64
+import contextlib
 import io
 import math
 
@@ -35,9 +36,7 @@ def brute_force_multi_peak(result: simcore.Result) -> set[int]:
     """Flat indices of the lit pixels whose band-limited echo has two or more peaks, every lit
     pixel counted with ``reproduce.n_peaks`` (no shortcut)."""
     e = result.echo
-    return {
-        int(p) for i, p in enumerate(e.pixel) if reproduce.n_peaks(e.waveform_per_j(i)[2]) >= 2
-    }
+    return {int(p) for i, p in enumerate(e.pixel) if reproduce.n_peaks(e.waveform_per_j(i)[2]) >= 2}
 
 
 @pytest.fixture(scope="module")
@@ -158,3 +157,79 @@ def test_rescaling_maps_pixel_centres_to_the_pixels_that_see_them():
         for pixel in ([0, 0], [n_from - 1, n_from - 1], [n_from // 3, n_from // 2 + 1]):
             (chosen,) = waveforms.rescale_selection([pixel], n_from, n_to)
             assert sees(chosen, tangents_of(pixel, n_from, fov_rad), n_to, fov_rad)
+
+
+# -- the materials panel's part in the 3D scene ---------------------------------------------------
+def decoded(typed: dict) -> np.ndarray:
+    """The numbers of an ``encode.typed_array``."""
+    raw = base64.b64decode(typed["bvals"])
+    return np.frombuffer(raw, dtype=typed["dtype"]).reshape(typed["shape"])
+
+
+def test_hovering_or_choosing_a_part_highlights_its_facets():
+    with small_app(16) as app:
+        s, model = app.state, app.logic.engine.model
+        with s:
+            s.part_chosen = "lens"
+        assert s.highlight_part == "lens"
+        with s:
+            s.part_hover = "foil"  # the pointer over another row wins while it stays there
+        assert s.highlight_part == "foil"
+        cells = decoded(s.highlight_cells).reshape(-1, 4).astype(np.int64)
+        foil = model.mesh.faces[model.face_part == model.part_names.index("foil")]
+        assert np.all(cells[:, 0] == 3) and np.array_equal(cells[:, 1:], foil)
+        with s:
+            s.part_hover = None  # the pointer left: the chosen part again
+        assert s.highlight_part == "lens"
+        assert len(decoded(s.highlight_cells)) == 4 * 44  # the lens: 44 facets
+        with s:
+            s.part_chosen = "not a part"
+        assert s.highlight_part == "" and s.highlight_cells == []
+
+
+@pytest.fixture(scope="module")
+def tiny_app():
+    with small_app(16) as app:
+        yield app
+
+
+@settings(
+    max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(hover=ANYTHING, chosen=ANYTHING)
+def test_the_part_highlight_takes_anything_a_page_sends(tiny_app, hover, chosen):
+    with tiny_app.state:
+        tiny_app.state.update({"part_hover": hover, "part_chosen": chosen})
+    assert tiny_app.state.highlight_part in ("", *tiny_app.logic.engine.model.part_names)
+
+
+# -- the 3D scene camera and the field of view ----------------------------------------------------
+def angle_from_axis_deg(points: np.ndarray, camera: dict) -> np.ndarray:
+    """Angles [deg] of display-frame points from the camera's line of sight."""
+    position, focal = np.array(camera["position"]), np.array(camera["focalPoint"])
+    axis = (focal - position) / np.linalg.norm(focal - position)
+    rays = points - position
+    cos = rays @ axis / np.linalg.norm(rays, axis=1)
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+@pytest.mark.parametrize("distance_m", [50.0, 500.0, 1000.0, 3000.0, 5000.0])
+def test_the_scene_camera_keeps_the_field_of_view_readable_at_any_distance(tiny_app, distance_m):
+    """The footprint at the target lies inside the scene camera's view (30 deg), and it or the
+    target fills a fifth of it (the fixed camera had the footprint's corners outside from 390 m
+    and its whole rectangle from 550 m: at 3 km only the boresight crossed the view)."""
+    with contextlib.nullcontext(tiny_app) as app:
+        change(app, distance_m=distance_m)
+        camera = app.state.scene_camera
+        points = decoded(app.state.frustum["mesh"]["points"]).astype(np.float64)
+        half_view_deg = camera["viewAngle"] / 2.0
+        assert np.all(angle_from_axis_deg(points[8:12], camera) < half_view_deg)
+        footprint = points[8:12]  # the rectangle at the target's distance
+        side_m = np.linalg.norm(footprint[1] - footprint[0])
+        assert side_m == pytest.approx(2 * distance_m * math.tan(0.015), rel=1e-5)
+        camera_m = np.linalg.norm(np.array(camera["position"]) - camera["focalPoint"])
+        shown_m = max(side_m, 2 * app.logic.engine.frame.radius_m)
+        assert 2 * math.degrees(math.atan(shown_m / 2 / camera_m)) > camera["viewAngle"] / 5
+        # the frustum keeps its shape: as deep as it is wide, or deeper
+        depth_m = np.linalg.norm(points[12] - points[13])
+        assert depth_m >= min(side_m, 3.7 * app.logic.engine.frame.radius_m)

@@ -172,7 +172,9 @@ html { overflow-y: auto; }
 .array-box { position: relative; width: min(100% - 16px, 33vh); aspect-ratio: 1 / 1;
   margin: 4px auto 6px auto; background: #1e1e24; overflow: hidden; }
 .array-box:focus-visible { outline: 3px solid #ffb300; outline-offset: 2px; }
-.array-zoom { position: absolute; inset: 0; transform-origin: 0 0; }
+.array-zoom { position: absolute; left: 0; top: 0; width: 100%; height: 100%; }
+.image-kind { flex-wrap: wrap; height: auto !important; max-width: 100%; }
+.image-kind .v-btn { min-height: 22px; }
 .pixel-readout { min-height: 1.4em; font-variant-numeric: tabular-nums; }
 .array-image { width: 100%; height: 100%; display: block; image-rendering: pixelated;
   cursor: crosshair; user-select: none; }

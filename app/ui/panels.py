@@ -9,6 +9,8 @@ from trame.widgets import vuetify3 as v3
 from app.ui import compare
 from app.ui.widgets import button_toggle, html_attributes
 
+# (A handler that starts as an arrow function would be taken by Vue for the handler itself and
+# evaluated when drawn: those below that run one start with ``void``.)
 # The image's zoom lives in the page (client-only state ``array_zoom``: scale s in [1, 16], the
 # visible window's top-left corner x, y in fractions of the image). ZOOM(z, f, u, v): zoom by f
 # about the point at fractions (u, v) of the box, which stays put.
@@ -32,7 +34,7 @@ PIXEL_CLICK = (
 # The pointer's pixel goes to the server for its readout when it changes, at most every 50 ms
 # (and once more 60 ms after the last move, so the readout ends on the pixel under the pointer).
 PIXEL_HOVER = (
-    f"((p, el, w) => {{ const send = () => {{ if (el.dataset.hover !== p.join()) {{ "
+    f"void ((p, el, w) => {{ const send = () => {{ if (el.dataset.hover !== p.join()) {{ "
     "el.dataset.hover = p.join(); el.dataset.t = Date.now(); trigger('pixel_hover', p); } }; "
     "w.clearTimeout(+el.dataset.timer); "
     "if (Date.now() - (+el.dataset.t || 0) > 50) send(); "
@@ -52,7 +54,7 @@ DRAG_START = (
     "array_zoom.y].join(); $event.currentTarget.dataset.dragged = '0'"
 )
 DRAG = (
-    "((e, el, z) => { if (!(e.buttons & 1) || !el.dataset.drag || z.s <= 1) return; "
+    "void ((e, el, z) => { if (!(e.buttons & 1) || !el.dataset.drag || z.s <= 1) return; "
     "const d = el.dataset.drag.split(',').map(Number), r = el.getBoundingClientRect(), "
     "m = 1 - 1 / z.s, dx = e.clientX - d[0], dy = e.clientY - d[1]; "
     "if (Math.abs(dx) + Math.abs(dy) > 4) el.dataset.dragged = '1'; "
@@ -72,14 +74,17 @@ KEYS = (
     f"if (e.key === '-' || e.key === '_') return {ZOOM}(z, 1 / 1.5, 0.5, 0.5); "
     "if (e.key === '0') return { s: 1, x: 0, y: 0 }; return z; })($event, array_zoom)"
 )
+# The zoomed image is laid out at its zoomed size (not scaled by a CSS transform, which would
+# scale the image as drawn at the box's size: its pixel edges rounded there, up to half a pixel
+# off at high zoom), so each pixel lies where a click finds it.
 ZOOM_STYLE = (
-    "{ transform: 'scale(' + array_zoom.s + ') translate(' + (-100 * array_zoom.x) + '%, ' "
-    "+ (-100 * array_zoom.y) + '%)' }",
+    "{ width: (100 * array_zoom.s) + '%', height: (100 * array_zoom.s) + '%', "
+    "left: (-100 * array_zoom.s * array_zoom.x) + '%', "
+    "top: (-100 * array_zoom.s * array_zoom.y) + '%' }",
 )
 MARKER_STYLE = (
     "{ left: ((p[1] + 0.5) / array_image.pixels * 100) + '%', "
     "top: ((p[0] + 0.5) / array_image.pixels * 100) + '%', "
-    "transform: 'translate(-50%, -50%) scale(' + (1 / array_zoom.s) + ')', "
     "borderColor: selection_colors[i % selection_colors.length] }"
 )
 
@@ -136,6 +141,7 @@ def array_card() -> None:
             classes="array-box",
             tabindex="0",
             wheel=WHEEL,
+            __events=["wheel"],  # not among trame's known DOM events
             mousedown=DRAG_START,
             mousemove=DRAG,
             mouseup=DRAG_END,

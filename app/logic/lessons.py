@@ -131,7 +131,8 @@ LESSONS: tuple[Lesson, ...] = (
         try_next=(
             "Change Pitch by one degree either way: the rim moves off these pixels and each "
             "echo keeps one peak, the dish's or the structure's. Shift-click along the dish's "
-            "new edge to find two again."
+            "new edge to find two again; the array image's Multi-peak mode marks every pixel "
+            "with two."
         ),
         reference="docs/physics.md#eq-29",
         reference_title="Eq. 29, the pixel's impulse response",

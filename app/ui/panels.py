@@ -42,16 +42,21 @@ PIXEL_HOVER = (
     f"({PIXEL_AT}, $event.currentTarget, $event.view)"
 )
 HOVER_END = "$event.currentTarget.dataset.hover = ''; trigger('pixel_hover', [])"
+# The wheel zooms about the pointer with Ctrl (or Cmd) held, or once the image was clicked
+# (until the pointer leaves it); otherwise it scrolls the page, as over the 3D views.
 WHEEL = (
-    "$event.preventDefault(); array_zoom = ((e, r) => "
-    f"{ZOOM}(array_zoom, e.deltaY < 0 ? 1.25 : 0.8, "
-    "(e.clientX - r.left) / r.width, (e.clientY - r.top) / r.height))"
-    "($event, $event.currentTarget.getBoundingClientRect())"
+    "array_zoom = ((e, el, z) => { "
+    "if (!(e.ctrlKey || e.metaKey || el.dataset.active === '1')) return z; "
+    "e.preventDefault(); const r = el.getBoundingClientRect(); "
+    f"return {ZOOM}(z, e.deltaY < 0 ? 1.25 : 0.8, "
+    "(e.clientX - r.left) / r.width, (e.clientY - r.top) / r.height); })"
+    "($event, $event.currentTarget, array_zoom)"
 )
 # Drag pans (when zoomed); a drag's last mouse-up is not a click.
 DRAG_START = (
     "$event.currentTarget.dataset.drag = [$event.clientX, $event.clientY, array_zoom.x, "
-    "array_zoom.y].join(); $event.currentTarget.dataset.dragged = '0'"
+    "array_zoom.y].join(); $event.currentTarget.dataset.dragged = '0'; "
+    "$event.currentTarget.dataset.active = '1'"
 )
 DRAG = (
     "void ((e, el, z) => { if (!(e.buttons & 1) || !el.dataset.drag || z.s <= 1) return; "
@@ -63,6 +68,7 @@ DRAG = (
     "($event, $event.currentTarget, array_zoom)"
 )
 DRAG_END = "$event.currentTarget.dataset.drag = ''"
+LEAVE = "$event.currentTarget.dataset.drag = ''; $event.currentTarget.dataset.active = ''"
 # Keys on the focused image: arrows pan, + and - zoom about the centre, 0 resets.
 KEYS = (
     "array_zoom = ((e, z) => { const d = 0.2 / z.s, m = 1 - 1 / z.s, "
@@ -119,8 +125,8 @@ def array_card() -> None:
             )
         with html.Div(classes="d-flex align-center px-4"):
             html.Div(
-                "Click a pixel to see its echo; shift-click adds more. Wheel, drag, arrows, "
-                "+ / − zoom and pan.",
+                "Click a pixel to see its echo; shift-click adds more. Ctrl + wheel (or click, "
+                "then wheel), drag, arrows, + / − zoom and pan.",
                 classes="hint text-caption",
             )
             v3.VSpacer()
@@ -145,7 +151,7 @@ def array_card() -> None:
             mousedown=DRAG_START,
             mousemove=DRAG,
             mouseup=DRAG_END,
-            mouseleave=DRAG_END,
+            mouseleave=LEAVE,
             keydown=KEYS,
             **html_attributes(
                 role="group",

@@ -1,8 +1,8 @@
 """Finding things on the detector array in a real headless Chromium, on a server of its own: the
-Multi-peak mode marks the double-peak lesson's pixels (magenta on the page), the wheel zooms
-about the pointer, the readout names the pixel under the pointer with its echo peaks, a click
-on the zoomed image selects the pixel under the pointer, and the keys and buttons zoom and
-pan."""
+Multi-peak mode marks the double-peak lesson's pixels (magenta on the page), Ctrl + wheel zooms
+about the pointer (the wheel alone scrolls the page until the image is clicked), the readout
+names the pixel under the pointer with its echo peaks, a click on the zoomed image selects the
+pixel under the pointer, and the keys and buttons zoom and pan."""
 
 from __future__ import annotations
 
@@ -53,11 +53,21 @@ def test_multi_peak_mode_zoom_hover_and_click(page, finding_url, artifacts_dir):
     assert {tuple(p) for p in lesson.selection} <= marked
     assert len(marked) == lesson.figures["n_double"]
 
-    # the wheel zooms about the pointer: the lesson's first pixel stays under it
+    # the wheel alone scrolls the page; with Ctrl it zooms about the pointer: the lesson's
+    # first pixel stays under it
     page.locator(".array-box").scroll_into_view_if_needed()
     page.mouse.move(*pixel_on_screen(page, r, c))
+    scrolled = page.evaluate("() => window.scrollY")
+    page.mouse.wheel(0, -100)
+    page.wait_for_timeout(300)
+    assert state(page, "array_zoom")["s"] == 1
+    assert page.evaluate("() => window.scrollY") < scrolled  # the page went up
+    page.locator(".array-box").scroll_into_view_if_needed()
+    page.mouse.move(*pixel_on_screen(page, r, c))
+    page.keyboard.down("Control")
     for _ in range(12):
         page.mouse.wheel(0, -100)
+    page.keyboard.up("Control")
     page.wait_for_function("() => window.trame.state.get('array_zoom').s >= 10")
     zoom = state(page, "array_zoom")
     x, y = pixel_on_screen(page, r, c)
@@ -93,6 +103,8 @@ def test_multi_peak_mode_zoom_hover_and_click(page, finding_url, artifacts_dir):
     moved = state(page, "array_zoom")
     assert moved["s"] == zoom["s"] and moved["x"] > zoom["x"] and moved["y"] > zoom["y"]
     assert state(page, "selected_pixels") == [[r, c]]
+    page.mouse.wheel(0, 100)  # the image was clicked: the wheel alone zooms it now
+    page.wait_for_function("(s) => window.trame.state.get('array_zoom').s < s", arg=moved["s"])
 
     # keys on the focused image: 0 resets, + zooms about the centre, arrows pan
     page.locator(".array-box").focus()

@@ -78,6 +78,9 @@ def echo_peaks(result: simcore.Result, i: int) -> int:
     return n_peaks(result.echo.waveform_per_j(int(i))[2])
 
 
+_SEPARATION_S: dict[tuple, float] = {}  # (pulse shape, time step) -> the separation [s]
+
+
 def _two_peak_separation_s(result: simcore.Result) -> float:
     """The smallest delay [s] between two equal copies of the band-limited pulse whose sum
     ``echo_peaks`` counts as two peaks (bisection on the pulse table, 0.01 ns)."""
@@ -100,9 +103,6 @@ def _two_peak_separation_s(result: simcore.Result) -> float:
             lo_s, hi_s = (lo_s, mid_s) if double(mid_s) else (mid_s, hi_s)
         _SEPARATION_S[key] = hi_s
     return _SEPARATION_S[key]
-
-
-_SEPARATION_S: dict[tuple, float] = {}
 
 
 def multi_peak_pixels(result: simcore.Result) -> np.ndarray:

@@ -19,12 +19,12 @@ ZOOM = (
     "return { s: s, x: Math.min(m, Math.max(0, z.x + u / z.s - u / s)), "
     "y: Math.min(m, Math.max(0, z.y + v / z.s - v / s)) }; })"
 )
-# The (row, col) under the pointer, from its place in the (unzoomed) box and the zoom.
+# The (row, col) under the pointer on the image, which is laid out at its zoomed size: its place
+# on the image alone gives it (offsetX, offsetY: relative to the image, in whole CSS pixels as
+# Chromium gives them, so the pixel whose centre was clicked even where a pixel is 1.1 CSS pixels).
 PIXEL_AT = (
-    "((e, z, n) => { const r = e.currentTarget.closest('.array-box').getBoundingClientRect(); "
-    "return [Math.floor((z.y + (e.clientY - r.top) / r.height / z.s) * n), "
-    "Math.floor((z.x + (e.clientX - r.left) / r.width / z.s) * n)]; })"
-    "($event, array_zoom, array_image.pixels)"
+    "[Math.floor($event.offsetY / $event.currentTarget.clientHeight * array_image.pixels), "
+    "Math.floor($event.offsetX / $event.currentTarget.clientWidth * array_image.pixels)]"
 )
 # A click selects the pixel (shift-click adds), unless it ended a drag.
 PIXEL_CLICK = (

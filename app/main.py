@@ -17,7 +17,7 @@ from trame.app import get_server
 import simcore
 from app import security
 from app.engine import Engine
-from app.logic import flyaround
+from app.logic import flyaround, parts
 from app.logic.controller import AppLogic
 from app.state import STATE_KEYS
 from app.ui.layout import build_layout
@@ -91,6 +91,7 @@ def client_keys() -> dict[str, security.Screen]:
     keys: dict[str, security.Screen] = {key: security.scalar for key in STATE_KEYS}
     keys["materials"] = security.mapping_of_names
     keys.update({key: security.scalar for key in flyaround.STATE_KEYS})
+    keys.update({key: security.scalar for key in parts.STATE_KEYS})
     keys.update(
         {
             "fly_playing": security.scalar,

@@ -414,7 +414,8 @@ class AppLogic:
             # busy while a newer request than this frame's is under way (or a frame is held)
             self.state.busy = not self.runner.is_current(outcome.generation)
         if reframe:
-            self.server.js_call("scene_view", "resetCamera")
+            # the camera itself: this call may reach the page before the state does
+            self.server.js_call("scene_view", "setCamera", camera)
 
     # -- pixel selection --------------------------------------------------------------------------
     def on_pixel_click(

@@ -11,6 +11,8 @@ from typing import Any
 import simcore
 from app.payloads import scene3d
 
+STATE_KEYS = ("part_hover", "part_chosen")  # what a page sets: part names (anything else: none)
+
 
 class PartHighlight:
     """``highlight_part`` (the shown part's name, "" for none) and ``highlight_cells`` (its
@@ -24,7 +26,7 @@ class PartHighlight:
         state.update(
             {"part_hover": None, "part_chosen": None, "highlight_part": "", "highlight_cells": []}
         )
-        state.change("part_hover", "part_chosen")(self.update)
+        state.change(*STATE_KEYS)(self.update)
 
     def update(self, **_: Any) -> None:
         """Show the hovered part, else the chosen one, else none."""

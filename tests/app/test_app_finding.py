@@ -233,3 +233,14 @@ def test_the_scene_camera_keeps_the_field_of_view_readable_at_any_distance(tiny_
         # the frustum keeps its shape: as deep as it is wide, or deeper
         depth_m = np.linalg.norm(points[12] - points[13])
         assert depth_m >= min(side_m, 3.7 * app.logic.engine.frame.radius_m)
+
+
+def test_the_scene_view_is_reframed_when_the_scale_changes(tiny_app, monkeypatch):
+    calls = []
+    monkeypatch.setattr(tiny_app.server, "js_call", lambda *args: calls.append(args))
+    change(tiny_app, distance_m=500.0)
+    calls.clear()
+    change(tiny_app, distance_m=510.0)  # the same scale: the user's camera stays
+    assert calls == []
+    change(tiny_app, distance_m=3000.0)
+    assert calls == [("scene_view", "setCamera", tiny_app.state.scene_camera)]

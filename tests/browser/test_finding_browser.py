@@ -2,7 +2,8 @@
 Multi-peak mode marks the double-peak lesson's pixels (magenta on the page), Ctrl + wheel zooms
 about the pointer (the wheel alone scrolls the page until the image is clicked), the readout
 names the pixel under the pointer with its echo peaks, a click on the zoomed image selects the
-pixel under the pointer, and the keys and buttons zoom and pan."""
+pixel under the pointer, and the keys and buttons zoom and pan; a part's row in the materials
+panel highlights the part."""
 
 from __future__ import annotations
 
@@ -119,3 +120,13 @@ def test_multi_peak_mode_zoom_hover_and_click(page, finding_url, artifacts_dir):
     assert state(page, "array_zoom") == {"s": 1, "x": 0, "y": 0}
     page.get_by_role("button", name="Zoom in").click()
     assert state(page, "array_zoom")["s"] == pytest.approx(1.5)
+
+    # pointing at a part's row in the materials panel highlights it in the 3D scene
+    page.get_by_role("button", name="Target materials (per part)").click()
+    row = page.locator(".material-row").first  # the dish: part "cover"
+    row.scroll_into_view_if_needed()
+    row.hover()
+    page.wait_for_function("() => window.trame.state.get('highlight_part') === 'cover'")
+    assert page.locator(".highlight-row").inner_text().startswith("part cover")
+    page.mouse.move(1, 1)
+    page.wait_for_function("() => window.trame.state.get('highlight_part') === ''")

@@ -97,14 +97,32 @@ def ply_comment(text: str) -> str:
     )
 
 
+def cloud_attributes(cloud: PointCloud) -> tuple[tuple[str, type], ...]:
+    """The cloud's per-point attributes as (name, numpy type): the shared ATTRIBUTES, then any a
+    receiver adds (the Geiger-mode array's ``counts``, ``signal_pe``), stored as float64 unless
+    int32 or bool."""
+    shared = {name for name, _ in ATTRIBUTES}
+    extra = []
+    for name, values in cloud.attributes.items():
+        if name in shared:
+            continue
+        kind = np.asarray(values).dtype
+        extra.append(
+            (name, np.bool_ if kind == np.bool_ else np.int32 if kind == np.int32 else np.float64)
+        )
+    return (*ATTRIBUTES, *extra)
+
+
 def write_ply(path: str | Path, cloud: PointCloud, comments: tuple[str, ...] = ()) -> None:
-    """Binary little-endian PLY: x, y, z [m] and every per-point attribute of ATTRIBUTES."""
+    """Binary little-endian PLY: x, y, z [m] and every per-point attribute of the cloud (the
+    shared ATTRIBUTES, then a receiver's own)."""
+    attributes = cloud_attributes(cloud)
     dtype = [("x", "f8"), ("y", "f8"), ("z", "f8")]
-    dtype += [(name, _PLY_TYPES[t]) for name, t in ATTRIBUTES]
+    dtype += [(name, _PLY_TYPES[t]) for name, t in attributes]
     data = np.empty(len(cloud), dtype=dtype)
     for i, axis in enumerate("xyz"):
         data[axis] = cloud.points[:, i]
-    for name, _ in ATTRIBUTES:
+    for name, _ in attributes:
         data[name] = cloud.attributes[name]
     header = [ply_comment(c) for c in comments]
     ply = PlyData([PlyElement.describe(data, "vertex")], text=False, comments=header)
@@ -117,6 +135,8 @@ def read_ply(path: str | Path) -> PointCloud:
     vertex = PlyData.read(str(path))["vertex"].data
     points = np.stack([vertex[a].astype(np.float64) for a in "xyz"], axis=1)
     attrs = {name: vertex[name].astype(t) for name, t in ATTRIBUTES}
+    shared = {"x", "y", "z", *attrs}
+    attrs |= {n: np.asarray(vertex[n]) for n in vertex.dtype.names if n not in shared}
     return PointCloud(points=points, attributes=attrs)
 
 
@@ -207,6 +227,8 @@ _LAS_DESCRIPTIONS = {  # extra-bytes descriptions, at most 32 characters each
     "material_id": "material index (-1: outlier)",
     "facet_id": "mesh facet index (-1: outlier)",
     "is_outlier": "1: false alarm, 0: target",
+    "counts": "Geiger: counts in peak window",
+    "signal_pe": "Geiger: echo pe per pulse",
 }
 
 
@@ -261,9 +283,13 @@ def write_las(path: str | Path, cloud: PointCloud, comments: tuple[str, ...] = (
 
     from ._version import __version__  # noqa: PLC0415
 
+    attributes = cloud_attributes(cloud)
     header = laspy.LasHeader(point_format=_LAS_POINT_FORMAT, version="1.4")
     header.add_extra_dims(
-        [laspy.ExtraBytesParams(n, _LAS_TYPES[t], _LAS_DESCRIPTIONS[n]) for n, t in ATTRIBUTES]
+        [
+            laspy.ExtraBytesParams(n, _LAS_TYPES[t], _LAS_DESCRIPTIONS.get(n, n[:32]))
+            for n, t in attributes
+        ]
     )
     offsets, scale = _las_offsets_and_scale(cloud.points)
     header.offsets = offsets
@@ -277,7 +303,7 @@ def write_las(path: str | Path, cloud: PointCloud, comments: tuple[str, ...] = (
     las = laspy.LasData(header)
     las.x, las.y, las.z = (cloud.points[:, i] for i in range(3))
     attrs = cloud.attributes
-    for name, _ in ATTRIBUTES:
+    for name, _ in attributes:
         values = attrs[name]
         setattr(las, name, values.astype(np.uint8) if values.dtype == np.bool_ else values)
     outlier = attrs["is_outlier"]
@@ -307,6 +333,9 @@ def read_las(path: str | Path) -> PointCloud:
         raise ValueError(f"{path}: not an lmapd-sim LAS, no dimension {', '.join(missing)}")
     points = np.stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)], axis=1)
     attrs = {n: np.asarray(las[n]).astype(t) for n, t in ATTRIBUTES}
+    attrs |= {
+        n: np.asarray(las[n]) for n in las.point_format.extra_dimension_names if n not in attrs
+    }
     return PointCloud(points=points.astype(np.float64), attributes=attrs)
 
 

@@ -164,3 +164,19 @@ def test_a_foreign_las_is_refused_with_the_missing_dimensions(tmp_path):
     las.write(str(tmp_path / "other.las"))
     with pytest.raises(ValueError, match="not an lmapd-sim LAS, no dimension row"):
         io.read_cloud(tmp_path / "other.las")
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".las"])
+def test_a_receivers_own_attributes_are_written_and_read_back(tmp_path, suffix):
+    """The Geiger-mode array's extra per-point attributes (counts, signal_pe) go into PLY and LAS
+    beside the shared ones and come back exactly."""
+    result = simcore.simulate(
+        overrides={"pixels": 32, "fidelity.subrays": 1, "receiver.kind": "gm_apd"}
+    )
+    assert {"counts", "signal_pe"} <= set(result.cloud.attributes) and len(result.cloud) > 0
+    path = tmp_path / f"gm{suffix}"
+    io.write_cloud(path, result.cloud)
+    back = io.read_cloud(path)
+    assert set(back.attributes) == set(result.cloud.attributes)
+    for name in ("counts", "signal_pe"):
+        assert np.array_equal(back.attributes[name], result.cloud.attributes[name])

@@ -13,33 +13,24 @@ points) -- and prints the agreement figures.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import math
+import sys
 import time
 from pathlib import Path
 
-import matplotlib
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))  # support.mc_scene
+import matplotlib  # noqa: E402
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy import constants as sc  # noqa: E402
+from support.mc_scene import DT, K_ATT, RX, RX_THERMAL, SCENE, SHAPE, T_D, T_T, B, E  # noqa: E402
 
-import simcore  # noqa: E402
-from simcore import detection, echo, montecarlo, receiver, timing  # noqa: E402
+from simcore import detection, echo, montecarlo, timing  # noqa: E402
 
 C = sc.c
-SCENE = simcore.Scene()
-RX = receiver.receiver_model(SCENE.detector, SCENE.amplifiers, SCENE.laser.wavelength_m)
-RX_THERMAL = dataclasses.replace(RX, excess_noise=1e-9)  # negligible signal shot noise
-TAU = SCENE.laser.pulse_width_s
-B = SCENE.detector.bandwidth_hz
-E = SCENE.laser.pulse_energy_j
-SHAPE = echo.pulse_shape(TAU, echo.A_FWHM, B)
-DT = echo.default_time_step_s(TAU, B)
-T_D = timing.cfd_delay_s(SHAPE)
-K_ATT = SCENE.timing.cfd_fraction
-T_T = SCENE.timing.resolution_s
+
 GATE_M = 1000.0
 
 

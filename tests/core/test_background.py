@@ -16,9 +16,10 @@ import numpy as np
 import pytest
 import trimesh
 from scipy import constants as sc
+from support.mc_scene import DT, K_ATT, RX, SCENE, SHAPE, T_D, B, E
 
 import simcore
-from simcore import detection, echo, materials, montecarlo, receiver, sun, timing
+from simcore import detection, echo, materials, montecarlo, sun, timing
 from simcore.orbit import R_EARTH_M
 from simcore.scene import SceneError, with_overrides
 
@@ -351,8 +352,6 @@ def test_a_tle_that_parses_is_accepted_and_a_decayed_one_refused():
 # ----------------------------------------------------------------------------------------------
 # the receiver with background: Rice per pixel, and the Monte Carlo by day
 # ----------------------------------------------------------------------------------------------
-SCENE = simcore.Scene()
-RX = receiver.receiver_model(SCENE.detector, SCENE.amplifiers, SCENE.laser.wavelength_m)
 Q_E = sc.e
 
 
@@ -424,13 +423,6 @@ def test_a_saturated_glint_is_flagged_and_gives_no_point(meshes):
 
 
 # the Monte Carlo by day: each pixel's background current adds its shot noise
-TAU = SCENE.laser.pulse_width_s
-B = SCENE.detector.bandwidth_hz
-E = SCENE.laser.pulse_energy_j
-SHAPE = echo.pulse_shape(TAU, echo.A_FWHM, B)
-DT = echo.default_time_step_s(TAU, B)
-T_D = timing.cfd_delay_s(SHAPE)
-K_ATT = SCENE.timing.cfd_fraction
 SHOT_PER_A = RX.chain_noise_factor * 2 * Q_E * RX.gain * RX.excess_noise * B  # var per A
 # a background current that doubles the noise: sigma_pix = 2 sigma_n
 I_BG_A = 3 * RX.sigma_n_a**2 / SHOT_PER_A

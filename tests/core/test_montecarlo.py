@@ -8,30 +8,17 @@ Echoes are synthetic single-surface pixels whose weight gives a chosen SNR_na (E
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 from scipy import constants as sc
 from scipy import integrate, stats
+from support.mc_scene import DT, K_ATT, RX, RX_THERMAL, SCENE, SHAPE, T_D, T_T, TAU, B, E
 
 import simcore
-from simcore import detection, echo, montecarlo, receiver, timing
+from simcore import detection, echo, montecarlo, timing
 from simcore.echo import EchoStage
 
 C = sc.c
-SCENE = simcore.Scene()
-RX = receiver.receiver_model(SCENE.detector, SCENE.amplifiers, SCENE.laser.wavelength_m)
-# the same receiver with negligible signal shot noise (thermal + dark limited)
-RX_THERMAL = dataclasses.replace(RX, excess_noise=1e-9)
-TAU = SCENE.laser.pulse_width_s
-B = SCENE.detector.bandwidth_hz
-E = SCENE.laser.pulse_energy_j
-SHAPE = echo.pulse_shape(TAU, echo.A_FWHM, B)
-DT = echo.default_time_step_s(TAU, B)
-T_D = timing.cfd_delay_s(SHAPE)
-K_ATT = SCENE.timing.cfd_fraction
-T_T = SCENE.timing.resolution_s
 MAD_SIGMA = 1.4826  # robust sigma = 1.4826 x median absolute deviation (Gaussian)
 MAD_REL_SD = 1.1664  # sd of the MAD sigma estimate is 1.1664 sigma / sqrt(n) (efficiency 36.8 %)
 

@@ -12,19 +12,13 @@ import dataclasses
 import numpy as np
 import pytest
 from scipy import constants as sc
+from support.mc_scene import DT, K_ATT, RX, SCENE, SHAPE, T_D, TAU, B, E
 
 import simcore
-from simcore import detection, echo, montecarlo, receiver, timing
+from simcore import detection, echo, montecarlo, timing
 from simcore.receivers import lm_apd
 
 C = sc.c
-SCENE = simcore.Scene()
-RX = receiver.receiver_model(SCENE.detector, SCENE.amplifiers, SCENE.laser.wavelength_m)
-TAU, B, E = SCENE.laser.pulse_width_s, SCENE.detector.bandwidth_hz, SCENE.laser.pulse_energy_j
-SHAPE = echo.pulse_shape(TAU, echo.A_FWHM, B)
-DT = echo.default_time_step_s(TAU, B)
-T_D = timing.cfd_delay_s(SHAPE)
-K_ATT = SCENE.timing.cfd_fraction
 HOLDOFF_S = TAU  # one FWHM of the emitted pulse
 MAD_SIGMA = 1.4826
 MAD_REL_SD = 1.1664  # sd of the MAD sigma estimate is 1.1664 sigma / sqrt(n)

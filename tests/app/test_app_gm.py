@@ -6,17 +6,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from support.app_helpers import change, small_app
+from support.app_helpers import change, small_app, stat
 
 
 @pytest.fixture(scope="module")
 def app():
     with small_app() as lmapd:
         yield lmapd
-
-
-def stat(app, label: str) -> str:
-    return next(r["value"] for r in app.state.stats if r["label"] == label)
 
 
 def test_the_linear_mode_array_is_the_default_and_says_so(app):

@@ -5,17 +5,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from support.app_helpers import change, small_app
+from support.app_helpers import change, small_app, stat
 
 
 @pytest.fixture(scope="module")
 def app():
     with small_app() as lmapd:
         yield lmapd
-
-
-def stat(app, label: str) -> str:
-    return next(r["value"] for r in app.state.stats if r["label"] == label)
 
 
 def test_by_night_the_stats_say_no_background_and_the_chart_has_no_band(app):

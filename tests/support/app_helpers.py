@@ -56,3 +56,8 @@ def small_app(pixels: int = 48, model=None) -> Iterator[LmapdApp]:
     finally:
         app.logic.runner.close()
         app.uploads.files.cleanup()
+
+
+def stat(app: LmapdApp, label: str) -> str:
+    """The value the stats panel shows on the row ``label``."""
+    return next(r["value"] for r in app.state.stats if r["label"] == label)

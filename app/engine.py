@@ -7,6 +7,7 @@ material drop-downs and its mesh is sent to the 3D view once).
 
 from __future__ import annotations
 
+import hashlib
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -30,6 +31,7 @@ class Request:
     selection_pixels: int = 0  # array size the selection refers to (0: none yet)
     # the selection's directions as focal-plane tangents (x/f, y/f); () : its pixels' centres
     selection_tangents: tuple[tuple[float, float], ...] = ()
+    preview_first: bool = False  # show a preview while the frame computes, if one is quicker
 
 
 @dataclass(frozen=True)
@@ -54,6 +56,34 @@ class Frame:
     request: Request | None = None
 
 
+# The preview of a frame (app.logic.controller shows it first while the chosen preset's frame is
+# computed): one ray per pixel through its centre, no refinement of mixed pixels, no corner
+# probes or cell spread, the statistical noise model (Eqs. 27-28 drawn); the rest of the scene as
+# it is (seed included).
+PREVIEW_FIDELITY = {
+    "fidelity.subrays": 1,
+    "fidelity.refine_subrays": 0,
+    "fidelity.probe_corners": False,
+    "fidelity.cell_spread": False,
+    "fidelity.noise_model": "statistical",
+}
+# The stages whose recomputation makes a preview worth it: the geometry (ray casting and
+# refinement) and the waveforms. A change that only re-runs the receiver or the detection (TNR,
+# pulse energy, the threshold) is quicker than a preview would be, and is shown at once.
+PREVIEW_STAGES = ("hits", "echo")
+
+
+@dataclass(frozen=True)
+class Preview:
+    """The quick first look at a request: the point cloud and the array image only."""
+
+    cloud: dict
+    image: dict | None  # None: the image waits for the frame
+    n_points: int
+    simulate_s: float
+    views_s: float
+
+
 class Engine:
     """Owns the Pipeline (worker thread only) and the target's static display data."""
 
@@ -62,8 +92,9 @@ class Engine:
         self.model = model if model is not None else simcore.load_target(scene.target)
         self.frame = scene3d.display_frame(self.model)
         self.pipeline = simcore.Pipeline()
+        self.preview_pipeline = simcore.Pipeline()  # its own cache: the two never evict each other
         self.vertices_d = self.frame.from_target(self.model.mesh.vertices)  # display frame
-        # key, seen-facets mesh, legend, and the hits they came from (kept alive: id() unique)
+        # key (the seen set's content), seen-facets mesh, legend
         self._facets: tuple | None = None
 
     def target_geometry(self) -> dict:
@@ -109,16 +140,57 @@ class Engine:
         )
         return frame
 
+    @staticmethod
+    def preview_scene(scene: simcore.Scene) -> simcore.Scene:
+        """``scene`` at the preview's fidelity (see PREVIEW_FIDELITY)."""
+        return simcore.with_overrides(scene, PREVIEW_FIDELITY)
+
+    def wants_preview(self, scene: simcore.Scene) -> bool:
+        """Whether a preview would come sooner than ``scene``'s own frame: the scene asks for
+        more than the preview does and its frame must recompute the geometry or the waveforms."""
+        if self.preview_scene(scene).fidelity == scene.fidelity:
+            return False  # the frame is a preview already
+        return any(name in PREVIEW_STAGES for name in self.pipeline.stages_to_run(scene))
+
+    def compute_preview(
+        self, request: Request, stale: Callable[[], bool] = lambda: False
+    ) -> Preview:
+        """The preview of ``request`` (runs in the worker): its cloud and array image.
+
+        Raises StaleRequest like :meth:`compute`.
+        """
+        t0 = time.perf_counter()
+        try:
+            result = self.preview_pipeline.run(self.preview_scene(request.scene), should_stop=stale)
+        except simcore.Cancelled:
+            raise StaleRequest from None
+        if stale():
+            raise StaleRequest
+        t1 = time.perf_counter()
+        return Preview(
+            cloud=cloud.cloud_view(result, self.frame, request.color_by),
+            # the multi-peak marks need every pixel's waveform: they wait for the frame
+            image=None if request.image_kind == "multi_peak" else image.array_image(
+                result, request.image_kind
+            ),
+            n_points=len(result.cloud),
+            simulate_s=t1 - t0,
+            views_s=time.perf_counter() - t1,
+        )
+
     def _facets_payload(self, result: simcore.Result) -> tuple[tuple, dict, list[dict]]:
-        """The seen facets' mesh (rebuilt only when the hits or the materials changed) and the
-        material legend."""
-        key = (id(result.hits), result.target.part_materials)
+        """The seen facets' mesh and the material legend, rebuilt only when the set of facets
+        seen or the materials changed. The key is the set's content (a digest of the facet
+        numbers), not the hits: a new pose that sees the same facets keeps the key, and the app
+        sends nothing new to the 3D scene's facet colours."""
+        visible = np.ascontiguousarray(result.visible_faces, dtype=np.int64)
+        digest = hashlib.blake2b(visible.tobytes(), digest_size=16).hexdigest()
+        key = (len(visible), digest, result.target.part_materials)
         if self._facets is not None and self._facets[0] == key:
             return key, self._facets[1], self._facets[2]
-        visible = result.visible_faces
         mesh = scene3d.seen_facets_mesh(result.target, self.vertices_d, visible)
         legend = scene3d.material_legend(result.target, visible)
-        self._facets = (key, mesh, legend, result.hits)
+        self._facets = (key, mesh, legend)
         return key, mesh, legend
 
     @staticmethod

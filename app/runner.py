@@ -123,6 +123,12 @@ class Runner(Generic[Request, Value]):
         return time.perf_counter() - self._last_delivered_s >= self.min_refresh_s
 
     @property
+    def computing_generation(self) -> int:
+        """From inside ``compute``: the generation of the request being computed."""
+        with self._cond:
+            return self._computing_generation
+
+    @property
     def busy(self) -> bool:
         """A request is waiting or being computed."""
         with self._cond:

@@ -81,6 +81,18 @@ class Pipeline:
             timings_s=timings,
         )
 
+    def stages_to_run(self, scene: Scene) -> list[str]:
+        """The stages a :meth:`run` of ``scene`` would compute (the others come from the cache),
+        in chain order; nothing is computed here."""
+        keys: dict[str, tuple] = {}
+        names = []
+        for stage in CHAIN:
+            keys[stage.name] = (stage.reads(scene), *(keys[u] for u in stage.upstream))
+            cached = self._cache.get(stage.name)
+            if cached is None or cached[0] != keys[stage.name]:
+                names.append(stage.name)
+        return names
+
     def _output(self, stage: Stage, scene: Scene, key: tuple, outputs: dict, should_stop):
         """The stage's output (cached under ``key``, or computed) and its compute time [s]."""
         cached = self._cache.get(stage.name)

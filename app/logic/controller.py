@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 import simcore
-from app.engine import Engine, Frame, Request
+from app.engine import Engine, Frame, Preview, Request
 from app.logic import exports
 from app.logic.compare import FrameCompare
 from app.logic.controls import ControlPanel
@@ -34,7 +34,7 @@ from app.logic.selection import PixelSelection
 from app.logic.upload import LoadedTarget, TargetUploads
 from app.payloads import scene3d, stats, style
 from app.runner import Outcome, Runner
-from app.state import STATE_KEYS, Controls, controls_from_scene
+from app.state import STATE_KEYS, Controls, controls_from_scene, preset_of
 from simcore.target import fov_fill_distance_m, parts_table
 
 
@@ -54,10 +54,11 @@ class AppLogic:
         engine: Engine,
         base_scene: simcore.Scene,
         *,
-        debounce_s: float = 0.02,
+        debounce_s: float = 0.008,
         flow_control: bool = True,
         ack_timeout_s: float = 1.0,
         max_in_flight: int = 2,
+        previews: bool = True,
     ):
         self.server = server
         self.state = server.state
@@ -68,6 +69,8 @@ class AppLogic:
         )
         self.last_frame: Frame | None = None
         self.n_frames_pushed = 0
+        self.n_previews_pushed = 0
+        self.previews = previews  # a preview first when a frame must recompute its geometry
         self._loop: asyncio.AbstractEventLoop | None = None
         self._applied_faces_key: tuple | None = None
         self._pushed_generation = 0  # generation of the frame the page shows
@@ -151,7 +154,7 @@ class AppLogic:
                 "n_target_points": 0,
                 "n_outliers": 0,
                 "legend": [],
-                "array_image": {"src": "", "colorbar": None, "pixels": 0},
+                "array_image": {"png": None, "colorbar": None, "pixels": 0},
                 "selected_pixels": [],
                 "pixel_readout": None,
                 "selection_colors": list(style.SELECTION_COLORS),
@@ -164,6 +167,8 @@ class AppLogic:
                 "input_message": " ".join(startup_messages),
                 "frame_key": "",
                 "frame_generation": 0,
+                "frame_kind": "",
+                "frame_label": "",
                 "n_points": 0,
                 "share_query": link_query(self.panel.current, self.panel.initial),
             }
@@ -191,6 +196,8 @@ class AppLogic:
             selection=self.selection.current(),
             selection_pixels=self.selection.array_pixels,
             selection_tangents=self.selection.tangents(),
+            # not while the fly-around plays: each of its frames is shown at the preset
+            preview_first=self.previews and not self.state.fly_playing,
         )
         self.state.busy = True
         return self.runner.submit(request)
@@ -309,17 +316,58 @@ class AppLogic:
 
     # -- frames from the worker -------------------------------------------------------------------
     def _compute(self, request: Request) -> Frame:
-        """In the worker thread: the engine's frame, abandoned early if overtaken."""
-        return self.engine.compute(request, stale=self.runner.computing_is_stale)
+        """In the worker thread: the engine's frame, abandoned early if overtaken. When the frame
+        must recompute its geometry or waveforms, a preview goes to the page first (one ray per
+        pixel, no refinement: app.engine.PREVIEW_FIDELITY), so a slider's new value shows in a
+        fraction of the frame's time; the frame replaces it when ready."""
+        engine, stale = self.engine, self.runner.computing_is_stale
+        if request.preview_first and engine.wants_preview(request.scene):
+            generation = self.runner.computing_generation
+            preview = engine.compute_preview(request, stale=stale)
+            self._on_ui_thread(self.apply_preview, generation, preview)
+        return engine.compute(request, stale=stale)
 
     def _deliver(self, outcome: Outcome[Frame]) -> None:
-        """Called in the worker thread: hand the outcome to the event loop (or apply it directly
-        when there is no running loop, as in tests without a server)."""
+        """Called in the worker thread: hand the outcome to the event loop."""
+        self._on_ui_thread(self.apply_outcome, outcome)
+
+    def _on_ui_thread(self, call, *args) -> None:
+        """From the worker thread: run ``call(*args)`` on the event loop (or at once when there is
+        no running loop, as in tests without a server)."""
         loop = self._loop
         if loop is not None and loop.is_running():
-            loop.call_soon_threadsafe(self.apply_outcome, outcome)
+            loop.call_soon_threadsafe(call, *args)
         else:
-            self.apply_outcome(outcome)
+            call(*args)
+
+    def apply_preview(self, generation: int, preview: Preview) -> None:
+        """On the UI thread: show the preview of request ``generation`` if that request is still
+        the newest, its frame has not come yet and the page is not behind (then its frame
+        follows soon: a preview would only delay it)."""
+        if not self.runner.is_current(generation) or generation <= self._pushed_generation:
+            return
+        if self.pacer.wait_s() > 0:
+            return
+        key = f"p{generation}"
+        cloud = preview.cloud
+        update = {
+            "cloud_points": cloud["points"],
+            "cloud_outliers": cloud["outliers"],
+            "cloud_colorbar": cloud["colorbar"],
+            "n_target_points": cloud["n_target"],
+            "n_outliers": cloud["n_outliers"],
+            "n_points": preview.n_points,
+            "frame_kind": "preview",
+            "frame_label": PREVIEW_LABEL,
+            "frame_key": key,
+            "frame_generation": generation,
+        }
+        if preview.image is not None:
+            update["array_image"] = preview.image
+        self.pacer.sent(key)
+        self.n_previews_pushed += 1
+        with self.state:
+            self.state.update(update)
 
     def apply_outcome(self, outcome: Outcome[Frame]) -> None:
         """On the UI thread: drop stale outcomes, show errors, push or hold frames."""
@@ -394,6 +442,8 @@ class AppLogic:
             "error_message": "",
             "frame_key": key,
             "frame_generation": outcome.generation,
+            "frame_kind": "preset",
+            "frame_label": frame_label(frame),
             **self.compare.for_frame(frame),
         }
         # the scene view frames the field of view as well as the target: anew when its scale moves
@@ -423,6 +473,15 @@ class AppLogic:
     ) -> None:
         """Click on the array image: select pixel (row, col); with shift, add/remove it."""
         self.selection.click(self.last_frame, row, col, add)
+
+
+PREVIEW_LABEL = "preview: 1 ray per pixel"
+
+
+def frame_label(frame: Frame) -> str:
+    """What the page says of a frame it shows: the fidelity preset that made it."""
+    preset = preset_of(frame.result.scene)
+    return "custom fidelity" if preset == "custom" else f"{preset} preset"
 
 
 def part_info(model: simcore.TargetModel) -> dict[str, str]:

@@ -1,9 +1,13 @@
-"""Encodings the page understands: numpy arrays for vtk.js (base64 typed arrays, the format of
-trame-vtk's ``mesh()`` serializer), colour maps, PNG data URLs and engineering-unit labels."""
+"""Encodings the page understands: numpy arrays for vtk.js (binary typed arrays), colour maps, PNG
+images (binary) and engineering-unit labels.
+
+The state travels to the page as msgpack (wslink), which carries ``bytes`` as raw binary: an array
+goes as ``{bytes, dtype, shape}`` (no base64, no JSON number list) and the page turns it into the
+typed array vtk.js takes (``BINARY_SCRIPT`` in app.ui.views3d), a PNG into an object URL.
+"""
 
 from __future__ import annotations
 
-import base64
 import io
 import math
 from functools import cache
@@ -23,9 +27,10 @@ JS_TYPES = {
 
 
 def typed_array(values: np.ndarray) -> dict | list:
-    """A vtk.js typed array: ``{bvals, dtype, shape}`` with the bytes in base64 (C order).
+    """A typed array for the page: ``{bytes, dtype, shape}``, the values' bytes in C order
+    (little-endian, as the page's typed arrays on every platform the app supports).
 
-    values : (...) uint8, uint32, int32, float32 or float64. An empty array becomes ``[]``.
+    values : (...) uint8, uint16, uint32, int32, float32 or float64. An empty array becomes ``[]``.
     """
     a = np.ascontiguousarray(values)
     if a.dtype.name not in JS_TYPES:
@@ -33,10 +38,18 @@ def typed_array(values: np.ndarray) -> dict | list:
     if a.size == 0:
         return []
     return {
-        "bvals": base64.b64encode(memoryview(a.reshape(-1))).decode("ascii"),
+        "bytes": a.astype(a.dtype.newbyteorder("<"), copy=False).tobytes(),
         "dtype": a.dtype.name,
         "shape": list(a.shape),
     }
+
+
+def decoded(typed: dict | list) -> np.ndarray:
+    """The numpy array of a :func:`typed_array` (its dtype and shape)."""
+    if isinstance(typed, list):
+        return np.asarray(typed)
+    dtype = np.dtype(typed["dtype"]).newbyteorder("<")
+    return np.frombuffer(typed["bytes"], dtype=dtype).reshape(typed["shape"])
 
 
 def rgb_field(rgb: np.ndarray, location: str = "PointData") -> dict:
@@ -109,13 +122,14 @@ def rgb_of(hex_text: str) -> tuple[int, int, int]:
     return int(h[0:2], 16), int(h[2:4], 16), int(h[4:6], 16)
 
 
-def png_data_url(rgb: np.ndarray) -> str:
-    """A ``data:image/png;base64,...`` URL of an (h, w, 3) uint8 image."""
+def png_bytes(rgb: np.ndarray) -> bytes:
+    """The PNG file of an (h, w, 3) uint8 image (sent as binary; the page shows it through an
+    object URL)."""
     buf = io.BytesIO()
     Image.fromarray(np.ascontiguousarray(rgb, dtype=np.uint8), "RGB").save(
         buf, "PNG", compress_level=1
     )
-    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+    return buf.getvalue()
 
 
 _PREFIXES = ((1e0, ""), (1e-3, "m"), (1e-6, "µ"), (1e-9, "n"), (1e-12, "p"), (1e-15, "f"))

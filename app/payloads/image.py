@@ -56,7 +56,7 @@ def array_image(result: simcore.Result, kind: str) -> dict:
         cmap = RANGE_CMAP
     rgb = encode.colors_of(unit.ravel(), cmap).reshape(*values.shape, 3)
     rgb[~valid] = NO_ECHO_RGB
-    return {"src": encode.png_data_url(rgb), "colorbar": bar, "pixels": int(values.shape[0])}
+    return {"png": encode.png_bytes(rgb), "colorbar": bar, "pixels": int(values.shape[0])}
 
 
 def _finite_range(values: np.ndarray) -> tuple[float, float]:
@@ -146,7 +146,7 @@ def multi_peak_image(result: simcore.Result) -> dict:
     }
     rows, cols = np.divmod(flat, n)
     return {
-        "src": encode.png_data_url(rgb.reshape(n, n, 3)),
+        "png": encode.png_bytes(rgb.reshape(n, n, 3)),
         "colorbar": bar,
         "pixels": int(n),
         "multi_peak": [[int(r), int(c)] for r, c in zip(rows, cols, strict=True)],

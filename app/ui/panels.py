@@ -160,8 +160,8 @@ def array_card() -> None:
         ):
             with html.Div(classes="array-zoom", style=ZOOM_STYLE):
                 html.Img(
-                    src=("array_image.src",),
-                    v_show="array_image.src",
+                    src=("trame.utils.lmapdBin.imageUrl(array_image)",),
+                    v_show="array_image.png",
                     classes="array-image",
                     draggable="false",
                     alt="detector array image",

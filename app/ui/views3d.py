@@ -2,9 +2,11 @@
 mesh coloured by material where seen, grey where hidden, the field-of-view frustum, a legend)
 and the point cloud (coloured by range, SNR or outlier flag; outliers always red and larger).
 
-Data arrive as base64 typed arrays in the trame state. The whole mesh is sent once and drawn
-grey; each frame sends only the facets seen, in their material colours, drawn over it. Each
-view's camera reset (the button, or the 'r' key) goes to the home camera held in the state.
+Data arrive as binary typed arrays in the trame state (``BINARY_SCRIPT`` makes vtk.js's typed
+arrays of them). The whole mesh is sent once and drawn grey; the facets seen are drawn over it in
+their material colours, as cells of the same points: a new set of seen facets sends only their
+cells and colours, and none is sent while the set stays the same. Each view's camera reset (the
+button, or the 'r' key) goes to the home camera held in the state.
 """
 
 from __future__ import annotations
@@ -19,6 +21,48 @@ from app.payloads.style import HIDDEN_COLOR
 BACKGROUND = "[0.102, 0.110, 0.137]"  # #1a1c23
 BACKGROUND_RGB = (26, 28, 35)
 HIDDEN_RGB = [round(c / 255, 3) for c in encode.rgb_of(HIDDEN_COLOR)]
+
+# Binary payloads (app.payloads.encode): msgpack hands the page each ``bytes`` value as a
+# Uint8Array; ``bin(value)`` returns the value with every ``{bytes, dtype, shape}`` replaced by the
+# typed array vtk.js takes (copied into its own, aligned buffer), the same object for the same
+# state value (so a view updates only when its value changes); ``imageUrl(image)`` an object URL
+# of a ``{png}`` image (the previous one is released).
+BINARY_SCRIPT = """
+window.trame.utils.lmapdBin = (() => {
+  const TYPES = { uint8: Uint8Array, uint16: Uint16Array, uint32: Uint32Array,
+                  int32: Int32Array, float32: Float32Array, float64: Float64Array };
+  const made = new WeakMap();
+  const typed = (v) => {
+    const T = TYPES[v.dtype], own = new Uint8Array(v.bytes);  // a copy: aligned
+    return new T(own.buffer, 0, own.byteLength / T.BYTES_PER_ELEMENT);
+  };
+  const bin = (v) => {
+    if (!v || typeof v !== 'object' || ArrayBuffer.isView(v)) return v;
+    if (made.has(v)) return made.get(v);
+    let out;
+    if (v.dtype && ArrayBuffer.isView(v.bytes)) out = typed(v);
+    else if (Array.isArray(v)) out = v.map(bin);
+    else out = Object.fromEntries(Object.entries(v).map(([k, x]) => [k, bin(x)]));
+    made.set(v, out);
+    return out;
+  };
+  let image = { of: null, url: '' };
+  const imageUrl = (v) => {
+    if (!v || !ArrayBuffer.isView(v.png)) return '';
+    if (image.of !== v) {
+      if (image.url) URL.revokeObjectURL(image.url);
+      image = { of: v, url: URL.createObjectURL(new Blob([v.png], { type: 'image/png' })) };
+    }
+    return image.url;
+  };
+  return { bin, imageUrl };
+})();
+"""
+
+
+def _bin(key: str) -> str:
+    """The template expression of state ``key`` with its binary arrays as typed arrays."""
+    return f"trame.utils.lmapdBin.bin({key})"
 
 
 def _view(ref: str, camera: str = "home_camera"):
@@ -58,28 +102,32 @@ def scene_card() -> None:
                     id="target",
                     property=(f"{{ color: {HIDDEN_RGB}, ambient: 0.3, diffuse: 0.7 }}",),
                 ):
-                    vtkw.VtkPolyData("target", points=("target_points",), polys=("target_polys",))
+                    vtkw.VtkPolyData(
+                        "target", points=(_bin("target_points"),), polys=(_bin("target_polys"),)
+                    )
                 with vtkw.VtkGeometryRepresentation(
                     id="seen",
                     property=("{ ambient: 0.3, diffuse: 0.75, specular: 0.05 }",),
                     mapper=("{ colorMode: 2, scalarMode: 2 }",),  # direct RGB, per facet
                     actor=("{ visibility: !!seen_facets }",),
                 ):
-                    vtkw.VtkMesh("seen_facets", state=("seen_facets",))
+                    vtkw.VtkMesh("seen_facets", state=(_bin("seen_facets"),))
                 with vtkw.VtkGeometryRepresentation(
                     id="highlight",
                     property=("{ color: [1.0, 0.86, 0.1], ambient: 0.5, diffuse: 0.6 }",),
                     actor=("{ visibility: !!highlight_part }",),
                 ):
                     vtkw.VtkPolyData(
-                        "highlight", points=("target_points",), polys=("highlight_cells",)
+                        "highlight",
+                        points=(_bin("target_points"),),
+                        polys=(_bin("highlight_cells"),),
                     )
                 with vtkw.VtkGeometryRepresentation(
                     id="frustum",
                     property=("{ color: [1.0, 0.42, 0.25], lineWidth: 1.5, lighting: false }",),
                     actor=("{ visibility: !!frustum }",),  # no input before the first frame
                 ):
-                    vtkw.VtkMesh("frustum", state=("frustum",))
+                    vtkw.VtkMesh("frustum", state=(_bin("frustum"),))
             _material_legend()
             html.Div("{{ credit }}", classes="credit-overlay")
 
@@ -114,19 +162,19 @@ def cloud_card() -> None:
                     property=("{ pointSize: 3, lighting: false }",),
                     actor=("{ visibility: !!cloud_points && n_target_points > 0 }",),
                 ):
-                    vtkw.VtkMesh("cloud_points", state=("cloud_points",))
+                    vtkw.VtkMesh("cloud_points", state=(_bin("cloud_points"),))
                 with vtkw.VtkGeometryRepresentation(
                     id="outliers",
                     property=("{ pointSize: 5, lighting: false }",),
                     actor=("{ visibility: !!cloud_outliers && n_outliers > 0 }",),
                 ):
-                    vtkw.VtkMesh("cloud_outliers", state=("cloud_outliers",))
+                    vtkw.VtkMesh("cloud_outliers", state=(_bin("cloud_outliers"),))
                 with vtkw.VtkGeometryRepresentation(  # a pinned frame (app.logic.compare)
                     id="pinned",
                     property=("{ pointSize: 2, lighting: false, opacity: 0.35 }",),
                     actor=("{ visibility: !!pinned_cloud && n_pinned_points > 0 }",),
                 ):
-                    vtkw.VtkMesh("pinned_cloud", state=("pinned_cloud",))
+                    vtkw.VtkMesh("pinned_cloud", state=(_bin("pinned_cloud"),))
             _cloud_legend()
 
 

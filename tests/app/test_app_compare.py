@@ -3,13 +3,12 @@ side by side with the new frame's; unpin and a change of target drop them."""
 
 from __future__ import annotations
 
-import base64
-
 import numpy as np
 import pytest
 from support.app_helpers import change, small_app
 
 from app.logic import compare
+from app.payloads import encode
 
 
 @pytest.fixture()
@@ -20,8 +19,7 @@ def app():
 
 def decoded_points(mesh: dict) -> np.ndarray:
     """(n, 3) float32 points of a vtk.js mesh payload (app.payloads.cloud.points_mesh)."""
-    typed = mesh["mesh"]["points"]
-    return np.frombuffer(base64.b64decode(typed["bvals"]), dtype=typed["dtype"]).reshape(-1, 3)
+    return encode.decoded(mesh["mesh"]["points"]).reshape(-1, 3)
 
 
 def test_nothing_is_pinned_at_start(app):

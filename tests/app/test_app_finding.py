@@ -5,7 +5,6 @@ changes."""
 
 from __future__ import annotations
 
-import base64
 import contextlib
 import io
 import math
@@ -21,15 +20,14 @@ import simcore
 from app.engine import Engine
 from app.logic.lessons import BY_KEY
 from app.main import LmapdApp
-from app.payloads import image, waveforms
+from app.payloads import encode, image, waveforms
 from simcore import reproduce
 from simcore.geometry import subray_tangents
 
 
-def png_rgb(data_url: str) -> np.ndarray:
-    """(h, w, 3) uint8 pixels of a PNG data URL."""
-    raw = base64.b64decode(data_url.split(",", 1)[1])
-    return np.asarray(Image.open(io.BytesIO(raw)).convert("RGB"))
+def png_rgb(png: bytes) -> np.ndarray:
+    """(h, w, 3) uint8 pixels of a PNG file's bytes."""
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
 
 
 def brute_force_multi_peak(result: simcore.Result) -> set[int]:
@@ -59,7 +57,7 @@ def test_the_multi_peak_mode_marks_the_double_peak_lessons_pixels(lesson_app):
     marked = {tuple(p) for p in shown["multi_peak"]}
     assert {tuple(p) for p in lesson.selection} <= marked
     assert len(marked) == lesson.figures["n_double"]  # the lesson's card: 15 of the lit pixels
-    rgb = png_rgb(shown["src"])
+    rgb = png_rgb(shown["png"])
     assert rgb.shape == (256, 256, 3)
     magenta = np.all(rgb == image.MULTI_PEAK_RGB, axis=2)
     assert {(int(r), int(c)) for r, c in zip(*np.nonzero(magenta), strict=True)} == marked
@@ -160,10 +158,7 @@ def test_rescaling_maps_pixel_centres_to_the_pixels_that_see_them():
 
 
 # -- the materials panel's part in the 3D scene ---------------------------------------------------
-def decoded(typed: dict) -> np.ndarray:
-    """The numbers of an ``encode.typed_array``."""
-    raw = base64.b64decode(typed["bvals"])
-    return np.frombuffer(raw, dtype=typed["dtype"]).reshape(typed["shape"])
+decoded = encode.decoded  # the numbers of an ``encode.typed_array``
 
 
 def test_hovering_or_choosing_a_part_highlights_its_facets():

@@ -39,6 +39,23 @@ def test_a_tnr_change_reruns_only_detection_and_the_cloud():
     assert ran == {"detection", "cloud"}
 
 
+@pytest.mark.parametrize(
+    "change",
+    [{"tnr": 4.5}, {"pulse_energy_j": 1e-3}, {"distance_m": 450.0}, {"pixels": 48}, {"seed": 7}],
+)
+def test_stages_to_run_names_exactly_the_stages_a_run_then_computes(change):
+    pipe = simcore.Pipeline()
+    base = simcore.with_overrides(simcore.load_scene(), pixels=64, tnr=5.0)
+    assert pipe.stages_to_run(base) == list(STAGES)  # an empty cache: everything
+    pipe.run(base)
+    assert pipe.stages_to_run(base) == []
+    scene = simcore.with_overrides(base, **change)
+    predicted = pipe.stages_to_run(scene)
+    timings = pipe.run(scene).timings_s
+    ran = [s for s in STAGES if timings[s] > 0]
+    assert predicted == ran and predicted  # nothing computed by the prediction itself
+
+
 def test_a_pulse_energy_change_never_reruns_the_echoes():
     run(pixels=64)
     res = run(pixels=64, pulse_energy_j=1e-3)

@@ -135,6 +135,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument(
         "--scene", default=None, help="scene TOML file or built-in name (default: paper)"
     )
+    parser.add_argument(
+        "--no-preview",
+        action="store_true",
+        help="always wait for the fidelity preset's frame (no quick preview first; for comparison)",
+    )
     return parser.parse_args(argv)
 
 
@@ -144,7 +149,7 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     try:
         scene = simcore.load_scene(args.scene)
-        app = LmapdApp(scene)
+        app = LmapdApp(scene, previews=not args.no_preview)
     except (simcore.SceneError, simcore.TargetError, OSError) as exc:
         print(f"lmapd app: {exc}", file=sys.stderr)
         return 2

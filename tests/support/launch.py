@@ -99,6 +99,7 @@ def app_process(
     scene: str | None = None,
     timeout_s: float = 120.0,
     log_path: Path | None = None,
+    app_args: tuple[str, ...] = (),
 ) -> Iterator[RunningApp]:
     """Start ``python -m app`` on a free port, wait for the address it prints and for that address
     to answer, yield it, stop the server.
@@ -109,6 +110,7 @@ def app_process(
     cmd = [sys.executable, "-m", "app", "--host", host, "--port", str(port)]
     if scene:
         cmd += ["--scene", scene]
+    cmd += list(app_args)
     log_file = open(log_path, "w+b") if log_path else tempfile.TemporaryFile()  # noqa: SIM115
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     proc = subprocess.Popen(cmd, cwd=REPO_DIR, stdout=log_file, stderr=subprocess.STDOUT, env=env)
@@ -145,9 +147,10 @@ def app_server(
     scene: str | None = None,
     timeout_s: float = 120.0,
     log_path: Path | None = None,
+    app_args: tuple[str, ...] = (),
 ) -> Iterator[str]:
     """:func:`app_process`, yielding only the address to open (``http://HOST:PORT/?token=...``)."""
-    with app_process(host, port, scene, timeout_s, log_path) as running:
+    with app_process(host, port, scene, timeout_s, log_path, app_args) as running:
         yield running.url
 
 

@@ -6,7 +6,9 @@ been quiet for ``debounce_s`` (but no longer than ``max_wait_s`` after the first
 a long drag still updates), computes the newest, and hands the outcome to ``deliver`` only if no
 newer request arrived meanwhile; stale outcomes are dropped and counted, except that while
 changes keep coming faster than a frame computes, an overtaken frame is still delivered (marked
-``interim``) when none has been delivered for ``min_refresh_s``, so a long drag keeps updating.
+``interim``) when none has been delivered for ``min_refresh_s`` since the changes began (or
+since the last delivery), so a long drag keeps updating while the first values of a new drag,
+after a pause, are still dropped when overtaken.
 
 ``compute`` runs in the worker thread only, so it may own objects that are not thread-safe
 (simcore's Pipeline); it may call ``computing_is_stale`` and raise ``StaleRequest`` to give up
@@ -74,6 +76,7 @@ class Runner(Generic[Request, Value]):
         self._pending: tuple[int, Request, float] | None = None
         self._first_unserved_s = 0.0
         self._last_submit_s = 0.0
+        self._burst_start_s = 0.0  # the first request after the runner was idle
         self._computing = False
         self._computing_generation = 0
         self._closed = False
@@ -92,6 +95,8 @@ class Runner(Generic[Request, Value]):
             if self._closed:
                 raise RuntimeError("the runner is closed")
             self._ensure_worker()
+            if self._pending is None and not self._computing:
+                self._burst_start_s = now  # changes begin (again) after a quiet spell
             self._generation += 1
             if self._pending is None:
                 self._first_unserved_s = now
@@ -119,8 +124,11 @@ class Runner(Generic[Request, Value]):
             return overtaken and not self._refresh_due()
 
     def _refresh_due(self) -> bool:
-        """With the lock held: no outcome delivered for ``min_refresh_s``."""
-        return time.perf_counter() - self._last_delivered_s >= self.min_refresh_s
+        """With the lock held: no outcome delivered for ``min_refresh_s``, counted from the last
+        delivery or, if later, from the start of the current run of changes (after a pause the
+        page shows a fresh frame already: the first values of a drag are not worth showing)."""
+        since_s = max(self._last_delivered_s, self._burst_start_s)
+        return time.perf_counter() - since_s >= self.min_refresh_s
 
     @property
     def computing_generation(self) -> int:

@@ -42,6 +42,9 @@ from support.launch import (  # noqa: E402
 from app.state import SPECS  # noqa: E402
 
 DISTANCES_M = (420.0, 600.0)
+# A pause before each drag: the browser's work after a frame (garbage collection, raster tasks,
+# the charts' deferred redraws) ends before the next drag starts, on either page of a --vs run.
+PAUSE_S = 0.4
 LISTENERS = """() => {
   window.lmapdBench = { release: 0, lastMove: 0 };
   document.addEventListener('pointermove', e => {
@@ -102,6 +105,7 @@ def slider_x(page, distance_m: float) -> tuple[float, float]:
 def drag_distance(page, to_m: float) -> dict:
     """Drag the thumb to ``to_m`` (press, move half-way, move, release); return the
     release->painted and last-move->painted times of the frame of the new value."""
+    time.sleep(PAUSE_S)
     before = page.evaluate(JS_STATE, "distance_m")
     thumb = page.locator(".slider-distance_m .v-slider-thumb").first.bounding_box()
     n0 = page.evaluate("() => (window.lmapdFrames || []).length")
@@ -191,12 +195,13 @@ def views(page) -> dict:
 
 def run(urls: dict[str, str], sizes: list[int], repeats: int) -> list[dict]:
     """Each server's page gets the same drags, taken in turn (A, B, A, B, ...) so that both
-    see the same spells of this shared machine."""
+    see the same spells of this shared machine. Each page has a browser of its own: pages of
+    one browser take turns in front, and a page coming to the front repaints everything."""
     rows = []
     with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM_PATH, args=CHROMIUM_ARGS)
         pages = {}
         for label, url in urls.items():
+            browser = p.chromium.launch(executable_path=CHROMIUM_PATH, args=CHROMIUM_ARGS)
             page = browser.new_page(viewport={"width": 1600, "height": 1000})
             page.add_init_script(MESSAGES)
             page.goto(url)
@@ -210,11 +215,11 @@ def run(urls: dict[str, str], sizes: list[int], repeats: int) -> list[dict]:
             runs: dict[str, list[dict]] = {label: [] for label in pages}
             for _ in range(repeats):
                 for label, page in pages.items():
-                    page.bring_to_front()
                     runs[label].append(drag_distance(page, next_distance(page)))
             for label, page in pages.items():
                 rows.append({"mode": label, **summary(n, runs[label]), **views(page)})
-        browser.close()
+        for page in pages.values():
+            page.context.browser.close()
     return rows
 
 

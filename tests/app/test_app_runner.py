@@ -218,3 +218,31 @@ def test_a_steady_stream_of_changes_still_shows_frames_every_min_refresh():
     assert delivered[-1].value == n and not delivered[-1].interim  # the final state comes last
     generations = [o.generation for o in delivered]
     assert generations == sorted(generations)
+
+
+def test_after_a_pause_an_overtaken_request_is_dropped_not_shown_as_an_interim_frame():
+    """The refresh clock starts with the changes, not with the last frame: after a quiet spell
+    longer than min_refresh_s, the first value of a drag that a newer one overtakes is dropped
+    (it used to be computed to the end and shown, delaying the value the drag ended on)."""
+    delivered = []
+    started = threading.Event()
+    runner = Runner(
+        lambda x: (started.set(), time.sleep(0.1), x)[-1],
+        delivered.append,
+        debounce_s=0.0,
+        max_wait_s=0.0,
+        min_refresh_s=0.2,
+    )
+    try:
+        runner.submit("before")
+        assert runner.wait_idle(5.0)
+        time.sleep(0.3)  # a pause longer than min_refresh_s
+        started.clear()
+        runner.submit("first move")
+        assert started.wait(5.0)
+        runner.submit("last move")  # overtakes the first while it computes
+        assert runner.wait_idle(5.0)
+    finally:
+        runner.close()
+    assert [o.value for o in delivered] == ["before", "last move"]
+    assert not any(o.interim for o in delivered) and runner.n_dropped == 1

@@ -92,7 +92,7 @@ class Engine:
         self.model = model if model is not None else simcore.load_target(scene.target)
         self.frame = scene3d.display_frame(self.model)
         self.pipeline = simcore.Pipeline()
-        self.preview_pipeline = simcore.Pipeline()  # its own cache: the two never evict each other
+        self.preview_pipeline = simcore.Pipeline()  # never evicts the frames' cache
         self.vertices_d = self.frame.from_target(self.model.mesh.vertices)  # display frame
         # key (the seen set's content), seen-facets mesh, legend
         self._facets: tuple | None = None
@@ -164,6 +164,10 @@ class Engine:
             result = self.preview_pipeline.run(self.preview_scene(request.scene), should_stop=stale)
         except simcore.Cancelled:
             raise StaleRequest from None
+        finally:
+            # a preview is made only when the geometry or the waveforms change, so its stages
+            # are seldom reused: they are not kept (one frame's worth of memory, tens of MB)
+            self.preview_pipeline.clear()
         if stale():
             raise StaleRequest
         t1 = time.perf_counter()

@@ -9,8 +9,11 @@ from __future__ import annotations
 import argparse
 import itertools
 import logging
+import os
 import secrets
+import signal
 import sys
+import threading
 
 from trame.app import get_server
 
@@ -140,19 +143,117 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         action="store_true",
         help="always wait for the fidelity preset's frame (no quick preview first; for comparison)",
     )
+    parser.add_argument(
+        "--shared",
+        action="store_true",
+        help="one process and one scene for every tab (default: each tab its own session)",
+    )
+    parser.add_argument(
+        "--max-sessions",
+        type=int,
+        default=None,
+        help="sessions open at once (default: as many as fit in the memory cap, at most 8)",
+    )
+    parser.add_argument(
+        "--memory-cap-mb",
+        type=float,
+        default=None,
+        help="no new session while the sessions' processes use this much memory (default: 3/4 "
+        "of the memory available at start)",
+    )
+    parser.add_argument(
+        "--idle-s",
+        type=float,
+        default=60.0,
+        help="a session whose page has been closed this long ends (default 60 s)",
+    )
+    parser.add_argument(
+        "--no-spare", action="store_true", help="start no process ahead of the next tab"
+    )
+    # a session's process (started by the launcher): its token is the first line of stdin,
+    # and it stops when stdin closes (the launcher is gone)
+    parser.add_argument("--token-stdin", action="store_true", help=argparse.SUPPRESS)
     return parser.parse_args(argv)
+
+
+def read_token_and_watch_stdin() -> str:
+    """A session process's token (the first line of stdin); then stop the process (as Ctrl+C
+    would) when stdin closes, so that no process outlives its launcher."""
+    token = sys.stdin.readline().strip()
+    if not token:
+        raise ValueError("no token on stdin")
+
+    def watch() -> None:
+        while sys.stdin.readline():
+            pass
+        os.kill(os.getpid(), signal.SIGINT)
+
+    threading.Thread(target=watch, name="lmapd-stdin-watch", daemon=True).start()
+    return token
+
+
+def _interrupt(*_) -> None:
+    raise KeyboardInterrupt
+
+
+def run_launcher(args: argparse.Namespace) -> int:
+    """Each tab its own session: the launcher (app.launcher) until Ctrl+C or SIGTERM."""
+    import asyncio
+
+    from app import launcher
+
+    mib = launcher.MIB
+    caps = launcher.default_caps(
+        max_sessions=args.max_sessions,
+        memory_cap_bytes=None if args.memory_cap_mb is None else int(args.memory_cap_mb * mib),
+        idle_s=max(0.0, args.idle_s),
+        spare=not args.no_spare,
+    )
+    try:
+        scene = simcore.load_scene(args.scene)  # the sessions' scene, checked once here
+        del scene
+    except (simcore.SceneError, simcore.TargetError, OSError) as exc:
+        print(f"lmapd app: {exc}", file=sys.stderr)
+        return 2
+    token = secrets.token_urlsafe(32)
+    door = launcher.Launcher(token, args.host, caps, scene=args.scene)
+
+    def announce(port: int) -> None:
+        for line in start_message(args.host, port, token):
+            print(line, flush=True)
+        print(
+            f"lmapd-sim app: each tab its own session: at most {caps.max_sessions} at once, "
+            f"{caps.memory_cap_bytes / mib:,.0f} MB for their processes, a closed page's session "
+            f"ends after {caps.idle_s:g} s (--shared: one scene for every tab)",
+            flush=True,
+        )
+
+    try:
+        asyncio.run(launcher.serve(door, args.host, args.port, announce))
+    except OSError as exc:  # port in use, bad host
+        print(f"lmapd app: cannot listen on {args.host}:{args.port}: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        pass
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``lmapd app`` and ``python -m app``; returns the exit status."""
     args = parse_args(sys.argv[1:] if argv is None else argv)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    if not args.shared:
+        return run_launcher(args)
     try:
+        token = read_token_and_watch_stdin() if args.token_stdin else None
         scene = simcore.load_scene(args.scene)
         app = LmapdApp(scene, previews=not args.no_preview)
-    except (simcore.SceneError, simcore.TargetError, OSError) as exc:
+    except (simcore.SceneError, simcore.TargetError, OSError, ValueError) as exc:
         print(f"lmapd app: {exc}", file=sys.stderr)
         return 2
+    if token is not None:
+        app.token = token
+        signal.signal(signal.SIGTERM, _interrupt)  # the launcher stops its sessions gracefully
     try:
         app.start(args.host, args.port)
     except OSError as exc:  # port in use, bad host

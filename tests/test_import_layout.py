@@ -125,7 +125,8 @@ APP_FLOORS = (
     ("app.payloads", "app.engine"),
     ("app.logic",),
     ("app.ui",),
-    ("app.main", "app.__main__", "app.security"),  # the server: joins them, guards the door
+    # the server: joins them, guards the door; the launcher: a process per session
+    ("app.main", "app.__main__", "app.security", "app.launcher"),
 )
 
 

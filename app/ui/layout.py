@@ -133,13 +133,16 @@ VIEW_SCROLL_SCRIPT = """
 """
 
 # Shared links (app.logic.links): a page opened with settings in its query string hands them to
-# the server once; ``url`` makes the link of the current settings, with this page's token.
+# the server once; ``url`` makes the link of the current settings, with this page's token. A
+# session's page (/s/<id>/..., app.launcher) links to the launcher's root, so that whoever opens
+# the link gets a session of their own with the same scene.
 LINK_SCRIPT = """
 window.trame.utils.lmapdLink = {
   url(query) {
     const token = new URLSearchParams(window.location.search).get('token');
     const head = token ? `token=${encodeURIComponent(token)}&` : '';
-    return `${window.location.origin}${window.location.pathname}?${head}${query || ''}`;
+    const path = window.location.pathname.replace(/^\\/s\\/[^/]+\\/.*$/, '/');
+    return `${window.location.origin}${path}?${head}${query || ''}`;
   },
   copy(query) {
     const text = this.url(query);

@@ -1,6 +1,7 @@
 """``lmapd app``: serve the browser app (the ``app`` package, installed with ``.[app]``).
 
-lmapd app [--host 127.0.0.1] [--port 8080] [--scene SCENE]
+lmapd app [--host 127.0.0.1] [--port 8080] [--scene SCENE] [--shared]
+          [--max-sessions N] [--memory-cap-mb MB] [--idle-s S] [--no-spare]
 """
 
 from __future__ import annotations
@@ -18,6 +19,13 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     app.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
     app.add_argument("--port", type=int, default=8080)
     app.add_argument("--scene", help="scene TOML file or built-in name (default: paper)")
+    app.add_argument(
+        "--shared", action="store_true", help="one scene for every tab (default: one per tab)"
+    )
+    app.add_argument("--max-sessions", type=int, help="sessions at once (default: from memory)")
+    app.add_argument("--memory-cap-mb", type=float, help="the sessions' memory cap [MB]")
+    app.add_argument("--idle-s", type=float, help="a closed page's session ends after this [s]")
+    app.add_argument("--no-spare", action="store_true", help="start no process ahead")
     app.set_defaults(func=run_cli)
     return app
 
@@ -31,4 +39,10 @@ def run_cli(args: argparse.Namespace) -> int:
     argv = ["--host", args.host, "--port", str(args.port)]
     if args.scene:
         argv += ["--scene", args.scene]
+    for option in ("max_sessions", "memory_cap_mb", "idle_s"):
+        value = getattr(args, option, None)
+        if value is not None:
+            argv += ["--" + option.replace("_", "-"), str(value)]
+    argv += ["--shared"] if args.shared else []
+    argv += ["--no-spare"] if args.no_spare else []
     return app_main.main(argv) or 0

@@ -100,14 +100,22 @@ def app_process(
     timeout_s: float = 120.0,
     log_path: Path | None = None,
     app_args: tuple[str, ...] = (),
+    sessions: bool = False,
 ) -> Iterator[RunningApp]:
     """Start ``python -m app`` on a free port, wait for the address it prints and for that address
     to answer, yield it, stop the server.
+
+    The app runs as one process with one scene for every page (``--shared``) unless ``sessions``
+    asks for the launcher (each page load its own session, with ``app_args`` such as
+    ``--max-sessions``); the launcher's address then answers with a redirect to a new session,
+    so it is waited for by its first line only.
 
     Raises RuntimeError (with the server's output) if it exits or does not answer in time.
     """
     port = port or free_port(host)
     cmd = [sys.executable, "-m", "app", "--host", host, "--port", str(port)]
+    if not sessions:
+        cmd.append("--shared")
     if scene:
         cmd += ["--scene", scene]
     cmd += list(app_args)
@@ -122,7 +130,7 @@ def app_process(
     try:
         deadline = time.monotonic() + timeout_s
         url = None
-        while url is None or not _answers(url):
+        while url is None or not (sessions or _answers(url)):
             if proc.poll() is not None or time.monotonic() > deadline:
                 state = f"exited with {proc.returncode}" if proc.poll() is not None else "timed out"
                 raise RuntimeError(f"the app server {state} before answering:\n{output()[-4000:]}")
@@ -148,9 +156,10 @@ def app_server(
     timeout_s: float = 120.0,
     log_path: Path | None = None,
     app_args: tuple[str, ...] = (),
+    sessions: bool = False,
 ) -> Iterator[str]:
     """:func:`app_process`, yielding only the address to open (``http://HOST:PORT/?token=...``)."""
-    with app_process(host, port, scene, timeout_s, log_path, app_args) as running:
+    with app_process(host, port, scene, timeout_s, log_path, app_args, sessions) as running:
         yield running.url
 
 

@@ -1,0 +1,605 @@
+"""``lmapd app``: each browser tab its own scene, one app process per session behind a launcher.
+
+trame keeps one state per server process, so every page of one app server shows the same scene:
+a freshly opened page shows the last visitor's pose, and two tabs steer each other. The launcher
+gives each page load its own app process (``python -m app --shared`` on 127.0.0.1 and a free
+port) and proxies everything under ``/s/<session id>/`` to it:
+
+* ``GET /?token=T&<settings>`` (the printed address, or a shared link) checks the token (or its
+  cookie) as the app's door does, takes the warm spare process (started ahead, so the new tab
+  does not wait for a process to start) or starts one, and redirects to
+  ``/s/<id>/?token=T&<settings>``; the page applies the settings itself (app.ui.layout's
+  LINK_SCRIPT), and its copy-link button makes links to ``/``, so each student who opens one gets
+  a session of their own with the same scene;
+* under ``/s/<id>/`` only GET and HEAD, and the websocket at ``/s/<id>/ws`` (trame's page builds
+  it from its own path), are passed to that session's process, with the process's own private
+  token (given on its stdin, never on a command line) and origin; the websocket's ``Origin`` and
+  the launcher's token are checked first, and frames are limited to wslink's chunk size (the
+  process reassembles messages within ``app.security``'s limits and screens every call);
+* an unknown or ended session gets a page saying so, with a link that starts a new one; over the
+  caps (``Caps``: sessions, the processes' total memory) a 503 page says how many are open;
+* a session whose websocket has been closed for ``idle_s`` (a reload reconnects well within it)
+  is stopped; a process that dies is noticed and forgotten; SIGINT or SIGTERM stops every child,
+  and a child whose launcher vanishes (even by SIGKILL) stops when its stdin closes.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import dataclasses
+import html
+import logging
+import os
+import re
+import secrets
+import signal
+import sys
+import time
+from collections.abc import Callable
+
+import aiohttp
+import psutil
+from aiohttp import web
+
+from app import security
+
+log = logging.getLogger(__name__)
+
+MIB = 2**20
+# One child's resident memory after its first frame with the paper scene at 256 x 256 (measured:
+# see the README's app section); the default session cap is derived from it.
+SESSION_RSS_BYTES = 600 * MIB
+MAX_DEFAULT_SESSIONS = 8
+MEMORY_SHARE = 0.75  # of the memory available at start, for the children together
+FRAME_BYTES = security.WS_CHUNK_BYTES + 4096  # one websocket frame: a wslink chunk and its header
+SESSION_ID = re.compile(r"^/s/(?P<id>[A-Za-z0-9_-]{1,64})(?P<rest>/.*)?$")
+ADDRESS_LINE = re.compile(r"^lmapd-sim app: http://127\.0\.0\.1:(?P<port>\d+)/")
+CHILD_HOST = "127.0.0.1"
+PASSED_HEADERS = (
+    "Content-Type",
+    "Content-Encoding",
+    "Cache-Control",
+    "Expires",
+    "Pragma",
+    "Last-Modified",
+    "ETag",
+    "Location",
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class Caps:
+    """The launcher's limits.
+
+    max_sessions : sessions open at once; the warm spare counts too (at most this many processes)
+    memory_cap_bytes : the children's total resident memory above which no session starts [bytes]
+    idle_s : a session whose websocket has been closed this long is stopped [s]
+    spare : keep one process started ahead
+    start_timeout_s : a process that has not listened after this long is given up [s]
+    """
+
+    max_sessions: int
+    memory_cap_bytes: int
+    idle_s: float = 60.0
+    spare: bool = True
+    start_timeout_s: float = 120.0
+
+
+def default_caps(
+    available_bytes: int | None = None,
+    session_rss_bytes: int = SESSION_RSS_BYTES,
+    max_sessions: int | None = None,
+    memory_cap_bytes: int | None = None,
+    idle_s: float = 60.0,
+    spare: bool = True,
+) -> Caps:
+    """The caps for this machine: the children may use ``MEMORY_SHARE`` of the memory available
+    now [bytes], and as many sessions as fit in it at ``session_rss_bytes`` each (at least 1, at
+    most ``MAX_DEFAULT_SESSIONS``); explicit values win."""
+    if available_bytes is None:
+        available_bytes = int(psutil.virtual_memory().available)
+    if memory_cap_bytes is None:
+        memory_cap_bytes = int(MEMORY_SHARE * available_bytes)
+    if max_sessions is None:
+        fits = memory_cap_bytes // max(1, session_rss_bytes)
+        max_sessions = int(min(MAX_DEFAULT_SESSIONS, max(1, fits)))
+    return Caps(max(1, max_sessions), max(0, memory_cap_bytes), idle_s, spare)
+
+
+class StartFailed(Exception):
+    """A child process exited or did not listen in time."""
+
+
+@dataclasses.dataclass(eq=False)
+class Child:
+    """One app process: its port on 127.0.0.1, its private token and its open websockets."""
+
+    proc: asyncio.subprocess.Process
+    port: int
+    token: str
+    started_s: float
+    n_sockets: int = 0
+    idle_since_s: float = 0.0
+    drain: asyncio.Task | None = None
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
+
+    @property
+    def alive(self) -> bool:
+        return self.proc.returncode is None
+
+    def rss_bytes(self) -> int:
+        """Resident memory [bytes] (0 once the process is gone)."""
+        try:
+            return int(psutil.Process(self.pid).memory_info().rss)
+        except (psutil.Error, OSError):
+            return 0
+
+    @property
+    def cookie(self) -> str:
+        return f"lmapd-token-{self.port}={self.token}"
+
+    @property
+    def origin(self) -> str:
+        return f"http://{CHILD_HOST}:{self.port}"
+
+
+def child_command(scene: str | None) -> list[str]:
+    """The command of one session's process: the one-scene app on loopback, any free port, its
+    token read from stdin (never on the command line, where other users could read it)."""
+    cmd = [sys.executable, "-m", "app", "--shared", "--host", CHILD_HOST, "--port", "0"]
+    cmd.append("--token-stdin")
+    if scene:
+        cmd += ["--scene", scene]
+    return cmd
+
+
+def safe_rest(rest: str) -> bool:
+    """A path inside a session that stays inside it: no dot segments, no backslashes, no
+    empty segments, no control characters."""
+    if not rest.startswith("/") or "\\" in rest or "//" in rest:
+        return False
+    if any(ord(c) < 32 or ord(c) == 127 for c in rest):
+        return False
+    return not any(seg in (".", "..") for seg in rest.split("/"))
+
+
+def message_page(status: int, title: str, text: str, link: str, link_text: str) -> web.Response:
+    """A short HTML page (never a trace): a title, a sentence, a link."""
+    body = (
+        "<!doctype html><html lang='en'><head><meta charset='utf-8'>"
+        f"<title>lmapd-sim: {html.escape(title)}</title></head>"
+        "<body style='font-family: sans-serif; max-width: 40em; margin: 3em auto'>"
+        f"<h1 class='launcher-title'>{html.escape(title)}</h1>"
+        f"<p class='launcher-message'>{html.escape(text)}</p>"
+        f"<p><a class='launcher-link' href='{html.escape(link, quote=True)}'>"
+        f"{html.escape(link_text)}</a></p></body></html>"
+    )
+    return web.Response(
+        status=status,
+        text=body,
+        content_type="text/html",
+        headers={"Cache-Control": "no-store"},
+    )
+
+
+class Launcher:
+    """The launcher's HTTP side and its children (see the module's docstring).
+
+    Parameters
+    ----------
+    token : the launch's access token (the printed address carries it)
+    host : the interface the launcher listens on (the origin check depends on it)
+    caps : the limits
+    scene : the scene every session starts from (a file or a built-in name; None: paper)
+    command : builds a child's command from ``scene`` (tests may replace it)
+    """
+
+    def __init__(
+        self,
+        token: str,
+        host: str,
+        caps: Caps,
+        scene: str | None = None,
+        command: Callable[[str | None], list[str]] = child_command,
+    ):
+        self.token = token
+        self.caps = caps
+        self.scene = scene
+        self.command = command
+        self.door = security.Door(token, host, security.Limits())
+        self.sessions: dict[str, Child] = {}
+        self.spare: asyncio.Task | None = None
+        self.n_starting = 0  # sessions being created (counted against the cap)
+        self.n_refused = 0
+        self.n_reaped = 0
+        self.n_start_failures = 0
+        self._lock = asyncio.Lock()
+        self._client: aiohttp.ClientSession | None = None
+        self._reaper: asyncio.Task | None = None
+        self._closing = False
+        self._all: set[Child] = set()  # every child not yet stopped (sessions, spare)
+
+    # -- the application -----------------------------------------------------------------------
+    def web_app(self) -> web.Application:
+        web_app = web.Application(client_max_size=64 * 1024)
+        web_app.router.add_route("*", "/{tail:.*}", self.handle)
+        web_app.on_startup.append(self._on_startup)
+        web_app.on_cleanup.append(self._on_cleanup)
+        return web_app
+
+    async def _on_startup(self, _app) -> None:
+        self._client = aiohttp.ClientSession(
+            auto_decompress=False, timeout=aiohttp.ClientTimeout(total=None, sock_connect=10)
+        )
+        self._ensure_spare()
+        self._reaper = asyncio.create_task(self._reap_forever())
+
+    async def _on_cleanup(self, _app) -> None:
+        await self.close()
+
+    # -- requests ------------------------------------------------------------------------------
+    async def handle(self, request: web.Request) -> web.StreamResponse:
+        authorised, from_address = self.door.token_ok(request)
+        websocket = request.headers.get("Upgrade", "").lower() == "websocket"
+        if not authorised:
+            self.door.n_refused += 1
+            return web.Response(
+                status=403,
+                text="Forbidden: open the address that `lmapd app` printed (it carries the "
+                "access token).\n",
+            )
+        if request.method not in ("GET", "HEAD"):
+            return web.Response(status=405, text="Method not allowed\n")
+        path = request.path
+        if path in ("/", "/index.html") and not websocket:
+            response = await self.new_session(request)
+        else:
+            response = await self.in_session(request, path, websocket)
+        if from_address and not websocket and not response.prepared:
+            response.set_cookie(
+                self.door.cookie_name(request), self.token, httponly=True, samesite="Strict"
+            )
+        return response
+
+    async def new_session(self, request: web.Request) -> web.StreamResponse:
+        """Start a session (the spare process if one is ready) and send the page to it."""
+        problem = self.over_caps()
+        if problem:
+            return self.refuse(request, problem)
+        self.n_starting += 1
+        try:
+            child = await self._take_child()
+        except StartFailed as exc:
+            log.error("a session's process did not start: %s", exc)
+            return message_page(
+                503,
+                "The session could not start",
+                "The simulator's process for this tab did not start (the server's log says "
+                "why). Try again in a moment.",
+                self._root_link(request),
+                "Try again",
+            )
+        finally:
+            self.n_starting -= 1
+        session_id = secrets.token_urlsafe(16)
+        child.idle_since_s = time.monotonic()
+        self.sessions[session_id] = child
+        self._ensure_spare()
+        log.info("session %s: process %d on port %d", session_id[:6], child.pid, child.port)
+        query = request.query_string
+        return _redirect(f"/s/{session_id}/" + (f"?{query}" if query else ""))
+
+    def over_caps(self) -> str | None:
+        """Why no session may start now, or None."""
+        n_open = len(self.sessions) + self.n_starting
+        if n_open >= self.caps.max_sessions:
+            return (
+                f"{_open(n_open)}, the most this server allows "
+                f"(--max-sessions {self.caps.max_sessions})."
+            )
+        used = self.children_rss_bytes()
+        if used >= self.caps.memory_cap_bytes:
+            return (
+                f"{_open(n_open)} and use {used / MIB:,.0f} MB, the most this server "
+                f"allows ({self.caps.memory_cap_bytes / MIB:,.0f} MB)."
+            )
+        return None
+
+    def refuse(self, request: web.Request, problem: str) -> web.Response:
+        self.n_refused += 1
+        log.warning("refused a new session: %s", problem)
+        idle = f"{self.caps.idle_s:g}"
+        return message_page(
+            503,
+            "No session free",
+            f"{problem} Close a tab of this app that you no longer use (its session ends {idle} s "
+            "after), then try again; or ask whoever runs the server to start it with a higher "
+            "--max-sessions.",
+            self._root_link(request),
+            "Try again",
+        )
+
+    @staticmethod
+    def _root_link(request: web.Request) -> str:
+        """The launcher's root with the request's settings (its token stays in the cookie)."""
+        query = [(k, v) for k, v in request.query.items() if k != "token"]
+        return "/" + ("?" + "&".join(f"{_q(k)}={_q(v)}" for k, v in query) if query else "")
+
+    async def in_session(self, request: web.Request, path: str, websocket: bool):
+        found = SESSION_ID.match(path)
+        child = self.sessions.get(found["id"]) if found else None
+        if child is None or not child.alive:
+            if found and child is not None:
+                self._forget(found["id"])
+            return message_page(
+                404,
+                "No such session",
+                "This page's session has ended (it was closed, left idle, or the server "
+                "restarted) or never existed. Each tab has a session of its own: start a new one.",
+                self._root_link(request),
+                "Start a new session",
+            )
+        rest = found["rest"]
+        if rest is None:  # /s/<id> -> /s/<id>/ (the page's relative addresses need the slash)
+            query = request.query_string
+            return _redirect(f"/s/{found['id']}/" + (f"?{query}" if query else ""))
+        if not safe_rest(rest):
+            return web.Response(status=404, text="Not found\n")
+        if websocket:
+            if rest != security.WS_PATH:
+                return web.Response(status=404, text="Not found\n")
+            return await self.proxy_websocket(request, child)
+        return await self.proxy_http(request, child, rest)
+
+    async def proxy_http(self, request: web.Request, child: Child, rest: str) -> web.Response:
+        query = [(k, v) for k, v in request.query.items()]
+        url = f"{child.origin}{_path(rest)}"
+        headers = {"Cookie": child.cookie}
+        if "Accept-Encoding" in request.headers:
+            headers["Accept-Encoding"] = request.headers["Accept-Encoding"]
+        try:
+            async with self._client.request(
+                request.method, url, params=query, headers=headers, allow_redirects=False
+            ) as answer:
+                body = await answer.read()
+                passed = {k: answer.headers[k] for k in PASSED_HEADERS if k in answer.headers}
+                return web.Response(status=answer.status, body=body, headers=passed)
+        except (aiohttp.ClientError, OSError) as exc:
+            log.warning("session process %d did not answer: %s", child.pid, exc)
+            return web.Response(status=502, text="The session's process did not answer\n")
+
+    async def proxy_websocket(self, request: web.Request, child: Child) -> web.StreamResponse:
+        problem = self.door.origin_problem(request)
+        if problem is not None:
+            log.warning("refused a websocket from %s: %s", request.remote, problem)
+            self.door.n_refused += 1
+            return web.Response(status=403, text="Forbidden\n")
+        try:
+            upstream = await self._client.ws_connect(
+                f"{child.origin}{security.WS_PATH}",
+                headers={"Origin": child.origin, "Cookie": child.cookie},
+                max_msg_size=FRAME_BYTES,
+                compress=0,
+                autoping=True,
+            )
+        except (aiohttp.ClientError, OSError) as exc:
+            log.warning("session process %d refused its websocket: %s", child.pid, exc)
+            return web.Response(status=502, text="The session's process did not answer\n")
+        page = web.WebSocketResponse(max_msg_size=FRAME_BYTES, heartbeat=30.0)
+        child.n_sockets += 1
+        try:
+            await page.prepare(request)
+            tasks = [
+                asyncio.create_task(_pump(page, upstream)),
+                asyncio.create_task(_pump(upstream, page)),
+            ]
+            _, pending = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
+            for task in pending:
+                task.cancel()
+            await asyncio.gather(*pending, return_exceptions=True)
+        finally:
+            child.n_sockets -= 1
+            child.idle_since_s = time.monotonic()
+            await upstream.close()
+            await page.close()
+        return page
+
+    # -- children ------------------------------------------------------------------------------
+    async def start_child(self) -> Child:
+        """Start one app process and wait until it listens. Raises StartFailed."""
+        token = secrets.token_urlsafe(32)
+        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        proc = await asyncio.create_subprocess_exec(
+            *self.command(self.scene),
+            stdin=asyncio.subprocess.PIPE,
+            stdout=asyncio.subprocess.PIPE,
+            env=env,
+            start_new_session=True,  # a Ctrl+C in the terminal reaches the launcher only
+        )
+        child = Child(proc, 0, token, time.monotonic())
+        self._all.add(child)
+        proc.stdin.write(token.encode() + b"\n")
+        try:
+            await proc.stdin.drain()
+            port = await asyncio.wait_for(self._read_port(proc), self.caps.start_timeout_s)
+        except (TimeoutError, StartFailed, ConnectionError) as exc:
+            await self.stop_child(child)
+            self.n_start_failures += 1
+            raise StartFailed(str(exc) or type(exc).__name__) from None
+        child.port = port
+        child.drain = asyncio.create_task(_drain(proc.stdout))
+        return child
+
+    @staticmethod
+    async def _read_port(proc: asyncio.subprocess.Process) -> int:
+        while True:
+            line = await proc.stdout.readline()
+            if not line:
+                await proc.wait()
+                raise StartFailed(f"the process exited with {proc.returncode} before listening")
+            found = ADDRESS_LINE.match(line.decode(errors="replace"))
+            if found:
+                return int(found["port"])
+
+    async def _take_child(self) -> Child:
+        async with self._lock:
+            spare, self.spare = self.spare, None
+        if spare is not None:
+            try:
+                child = await spare
+                if child.alive:
+                    return child
+                await self.stop_child(child)
+            except StartFailed as exc:
+                log.warning("the spare process failed: %s", exc)
+        return await self.start_child()
+
+    def _ensure_spare(self) -> None:
+        """Start a spare process if there is none and the caps leave room for one."""
+        if not self.caps.spare or self._closing or self.spare is not None:
+            return
+        if len(self.sessions) + self.n_starting + 1 > self.caps.max_sessions:
+            return
+        if self.children_rss_bytes() + SESSION_RSS_BYTES > self.caps.memory_cap_bytes:
+            return
+        self.spare = asyncio.create_task(self.start_child())
+        self.spare.add_done_callback(_quiet)
+
+    def children_rss_bytes(self) -> int:
+        """The children's total resident memory [bytes]."""
+        return sum(child.rss_bytes() for child in self._all)
+
+    async def stop_child(self, child: Child, wait_s: float = 10.0) -> None:
+        """Stop one process: SIGTERM, then SIGKILL after ``wait_s``."""
+        self._all.discard(child)
+        proc = child.proc
+        if proc.returncode is None:
+            with contextlib.suppress(ProcessLookupError):
+                proc.terminate()
+            try:
+                await asyncio.wait_for(proc.wait(), wait_s)
+            except TimeoutError:
+                with contextlib.suppress(ProcessLookupError):
+                    proc.kill()
+                await proc.wait()
+        if proc.stdin is not None:
+            proc.stdin.close()
+        if child.drain is not None:
+            child.drain.cancel()
+
+    def _forget(self, session_id: str) -> Child | None:
+        return self.sessions.pop(session_id, None)
+
+    async def reap(self) -> None:
+        """Forget sessions whose process died, stop those idle for ``idle_s``, replace a dead
+        spare."""
+        now = time.monotonic()
+        for session_id, child in list(self.sessions.items()):
+            if not child.alive:
+                code = child.proc.returncode
+                log.warning("session %s: its process exited (%s)", session_id[:6], code)
+                self._forget(session_id)
+                self._all.discard(child)
+            elif child.n_sockets == 0 and now - child.idle_since_s >= self.caps.idle_s:
+                log.info("session %s: idle for %.0f s, stopped", session_id[:6], self.caps.idle_s)
+                self._forget(session_id)
+                self.n_reaped += 1
+                await self.stop_child(child)
+        spare = self.spare
+        if spare is not None and spare.done():
+            if spare.exception() is not None or not spare.result().alive:
+                self.spare = None
+                if spare.exception() is None:
+                    await self.stop_child(spare.result())
+        if self.n_start_failures < 3:  # a process that cannot start is not restarted forever
+            self._ensure_spare()
+
+    async def _reap_forever(self) -> None:
+        period_s = min(1.0, max(0.05, self.caps.idle_s / 4))
+        while not self._closing:
+            await asyncio.sleep(period_s)
+            try:
+                await self.reap()
+            except Exception:  # the reaper must outlive any one failure
+                log.exception("reaping sessions failed")
+
+    async def close(self) -> None:
+        """Stop every child (sessions and spare) and the reaper."""
+        self._closing = True
+        if self._reaper is not None:
+            self._reaper.cancel()
+        spare, self.spare = self.spare, None
+        if spare is not None:
+            spare.cancel()
+            with contextlib.suppress(BaseException):
+                await spare
+        self.sessions.clear()
+        await asyncio.gather(*(self.stop_child(c) for c in list(self._all)))
+        if self._client is not None:
+            await self._client.close()
+
+
+def _open(n: int) -> str:
+    return "1 session is open" if n == 1 else f"{n} sessions are open"
+
+
+def _redirect(location: str) -> web.Response:
+    return web.Response(status=302, headers={"Location": location, "Cache-Control": "no-store"})
+
+
+def _q(text: str) -> str:
+    from urllib.parse import quote
+
+    return quote(text, safe="")
+
+
+def _path(rest: str) -> str:
+    from urllib.parse import quote
+
+    return quote(rest, safe="/-_.~")
+
+
+def _quiet(task: asyncio.Task) -> None:
+    """Read a background task's exception (logged where it is awaited)."""
+    if not task.cancelled():
+        task.exception()
+
+
+async def _pump(source, sink) -> None:
+    """Pass one websocket's frames to another until either closes."""
+    async for msg in source:
+        if msg.type == aiohttp.WSMsgType.BINARY:
+            await sink.send_bytes(msg.data)
+        elif msg.type == aiohttp.WSMsgType.TEXT:
+            await sink.send_str(msg.data)  # refused by the process's guard (closes)
+        else:
+            break
+
+
+async def _drain(stream: asyncio.StreamReader) -> None:
+    """Read a child's stdout to its end (its pipe must not fill up)."""
+    while await stream.readline():
+        pass
+
+
+async def serve(launcher: Launcher, host: str, port: int, announce: Callable[[int], None]) -> None:
+    """Serve until SIGINT or SIGTERM; then stop every child."""
+    runner = web.AppRunner(launcher.web_app(), handle_signals=False, access_log=None)
+    await runner.setup()
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    try:
+        site = web.TCPSite(runner, host, port)
+        await site.start()
+        sockets = site._server.sockets if site._server else []  # noqa: SLF001 - the bound port
+        announce(int(sockets[0].getsockname()[1]) if sockets else port)
+        await stop.wait()
+    finally:
+        await runner.cleanup()  # the launcher's on_cleanup stops the children
+        await launcher.close()

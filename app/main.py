@@ -251,6 +251,8 @@ def main(argv: list[str] | None = None) -> int:
     except (simcore.SceneError, simcore.TargetError, OSError, ValueError) as exc:
         print(f"lmapd app: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # stopped while starting (a session's launcher went away)
+        return 0
     if token is not None:
         app.token = token
         signal.signal(signal.SIGTERM, _interrupt)  # the launcher stops its sessions gracefully

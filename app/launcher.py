@@ -47,9 +47,10 @@ from app import security
 log = logging.getLogger(__name__)
 
 MIB = 2**20
-# One child's resident memory after its first frame with the paper scene at 256 x 256 (measured:
-# see the README's app section); the default session cap is derived from it.
-SESSION_RSS_BYTES = 600 * MIB
+# One session process's resident memory after its first frame with the paper scene at 256 x 256
+# (341-357 MB, median 344 MB, scripts/bench_sessions.py, 2026-11-25); the default session cap is
+# derived from it.
+SESSION_RSS_BYTES = 350 * MIB
 MAX_DEFAULT_SESSIONS = 8
 MEMORY_SHARE = 0.75  # of the memory available at start, for the children together
 FRAME_BYTES = security.WS_CHUNK_BYTES + 4096  # one websocket frame: a wslink chunk and its header

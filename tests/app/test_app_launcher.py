@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import contextlib
+import dataclasses
 import os
 import signal
 import subprocess
@@ -236,7 +237,7 @@ def test_the_websocket_is_proxied_with_its_origin_checked_and_its_frames_bounded
 
 def test_idle_sessions_end_and_dead_ones_are_forgotten_and_close_stops_all():
     async def body():
-        async with serving(caps(idle_s=0.3)) as (launcher, base, client):
+        async with serving(caps()) as (launcher, base, client):
             idle = (await new_session(client, base)).split("?")[0]
             kept = (await new_session(client, base)).split("?")[0]
             dies = (await new_session(client, base)).split("?")[0]
@@ -244,8 +245,9 @@ def test_idle_sessions_end_and_dead_ones_are_forgotten_and_close_stops_all():
                 f"ws://{base[7:]}{kept}ws?token={TOKEN}", headers={"Origin": base}
             )
             victim = launcher.sessions[dies.split("/")[2]]
-            os.kill(victim.pid, signal.SIGKILL)
             idle_child = launcher.sessions[idle.split("/")[2]]
+            launcher.caps = dataclasses.replace(launcher.caps, idle_s=0.3)  # from now on
+            os.kill(victim.pid, signal.SIGKILL)
             await until(lambda: len(launcher.sessions) == 1, "the idle and the dead session")
             assert launcher.n_reaped == 1 and idle_child.proc.returncode is not None
             status, text, _ = await get(client, f"{base}{idle}", **cookie(base))

@@ -73,9 +73,16 @@ def test_main_listens_on_loopback_unless_a_host_is_given(monkeypatch):
             started.append((host, port))
 
     monkeypatch.setattr(main_mod, "LmapdApp", FakeApp)
-    assert main_mod.main([]) == 0
-    assert main_mod.main(["--host", "0.0.0.0", "--port", "9001"]) == 0
+    assert main_mod.main(["--shared"]) == 0
+    assert main_mod.main(["--shared", "--host", "0.0.0.0", "--port", "9001"]) == 0
     assert started == [("127.0.0.1", 8080), ("0.0.0.0", 9001)]
+    # without --shared: the launcher (each tab its own session), on the same address
+    launched: list[tuple[str, int, int | None]] = []
+    monkeypatch.setattr(
+        main_mod, "run_launcher", lambda a: launched.append((a.host, a.port, a.max_sessions)) or 0
+    )
+    assert main_mod.main([]) == 0 and main_mod.main(["--port", "9002", "--max-sessions", "3"]) == 0
+    assert launched == [("127.0.0.1", 8080, None), ("127.0.0.1", 9002, 3)]
 
 
 def test_the_start_message_names_the_address_and_warns_off_loopback():

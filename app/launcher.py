@@ -148,14 +148,15 @@ class Child:
         return f"http://{CHILD_HOST}:{self.port}"
 
 
-def child_command(scene: str | None) -> list[str]:
+def child_command(scene: str | None, options: tuple[str, ...] = ()) -> list[str]:
     """The command of one session's process: the one-scene app on loopback, any free port, its
-    token read from stdin (never on the command line, where other users could read it)."""
+    token read from stdin (never on the command line, where other users could read it), and the
+    launcher's own app ``options`` (``--no-preview``)."""
     cmd = [sys.executable, "-m", "app", "--shared", "--host", CHILD_HOST, "--port", "0"]
     cmd.append("--token-stdin")
     if scene:
         cmd += ["--scene", scene]
-    return cmd
+    return cmd + list(options)
 
 
 def safe_rest(rest: str) -> bool:
@@ -196,7 +197,8 @@ class Launcher:
     host : the interface the launcher listens on (the origin check depends on it)
     caps : the limits
     scene : the scene every session starts from (a file or a built-in name; None: paper)
-    command : builds a child's command from ``scene`` (tests may replace it)
+    command : builds a child's command from ``scene`` and ``options`` (tests may replace it)
+    options : the sessions' app options (``--no-preview``)
     """
 
     def __init__(
@@ -205,12 +207,14 @@ class Launcher:
         host: str,
         caps: Caps,
         scene: str | None = None,
-        command: Callable[[str | None], list[str]] = child_command,
+        command: Callable[..., list[str]] = child_command,
+        options: tuple[str, ...] = (),
     ):
         self.token = token
         self.caps = caps
         self.scene = scene
         self.command = command
+        self.options = options
         self.door = security.Door(token, host, security.Limits())
         self.sessions: dict[str, Child] = {}
         self.spare: asyncio.Task | None = None
@@ -415,7 +419,7 @@ class Launcher:
         token = secrets.token_urlsafe(32)
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
         proc = await asyncio.create_subprocess_exec(
-            *self.command(self.scene),
+            *self.command(self.scene, self.options),
             stdin=asyncio.subprocess.PIPE,
             stdout=asyncio.subprocess.PIPE,
             env=env,

@@ -216,7 +216,8 @@ def run_launcher(args: argparse.Namespace) -> int:
         print(f"lmapd app: {exc}", file=sys.stderr)
         return 2
     token = secrets.token_urlsafe(32)
-    door = launcher.Launcher(token, args.host, caps, scene=args.scene)
+    options = ("--no-preview",) if args.no_preview else ()
+    door = launcher.Launcher(token, args.host, caps, scene=args.scene, options=options)
 
     def announce(port: int) -> None:
         for line in start_message(args.host, port, token):

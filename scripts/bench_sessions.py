@@ -45,7 +45,7 @@ def listening(proc: psutil.Process) -> bool:
 def one_tab(browser, spare: bool) -> tuple[float, float]:
     """(ms from navigation to the first frame, the session's RSS in MB after it settled)."""
     options = () if spare else ("--no-spare",)
-    with app_process(sessions=True, options=options) as running:
+    with app_process(sessions=True, app_args=options) as running:
         launcher = psutil.Process(running.pid)
         deadline = time.monotonic() + 120
         while spare and not any(listening(c) for c in launcher.children()):

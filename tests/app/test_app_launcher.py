@@ -35,7 +35,7 @@ FAKE = Path(__file__).resolve().parents[1] / "support" / "fake_session.py"
 WAIT_S = 60.0
 
 
-def fake_command(scene: str | None) -> list[str]:
+def fake_command(scene: str | None, options: tuple[str, ...] = ()) -> list[str]:
     return [sys.executable, str(FAKE)]
 
 
@@ -129,8 +129,9 @@ def test_the_message_page_escapes_what_it_shows():
 
 
 def test_a_sessions_token_is_never_on_its_command_line():
-    cmd = lau.child_command("paper")
-    assert "--token-stdin" in cmd and "--shared" in cmd and "127.0.0.1" in cmd
+    cmd = lau.child_command("paper", ("--no-preview",))
+    assert cmd[-1] == "--no-preview" and "--token-stdin" in cmd
+    assert "--shared" in cmd and "127.0.0.1" in cmd
     assert not any("token=" in part for part in cmd)
 
 
@@ -277,7 +278,7 @@ def _descendants(pid: int) -> list[psutil.Process]:
 @pytest.mark.slow
 def test_the_real_launcher_proxies_a_session_and_leaves_no_process_after_sigterm(tmp_path):
     options = ("--max-sessions", "2", "--no-spare")
-    with app_process(log_path=tmp_path / "server.log", sessions=True, options=options) as running:
+    with app_process(log_path=tmp_path / "server.log", sessions=True, app_args=options) as running:
 
         async def body():
             async with aiohttp.ClientSession() as client:

@@ -66,7 +66,7 @@ def test_main_listens_on_loopback_unless_a_host_is_given(monkeypatch):
     started: list[tuple[str, int]] = []
 
     class FakeApp:
-        def __init__(self, scene):
+        def __init__(self, scene, **_):
             pass
 
         def start(self, host, port):

@@ -174,9 +174,9 @@ class Engine:
         return Preview(
             cloud=cloud.cloud_view(result, self.frame, request.color_by),
             # the multi-peak marks need every pixel's waveform: they wait for the frame
-            image=None if request.image_kind == "multi_peak" else image.array_image(
-                result, request.image_kind
-            ),
+            image=None
+            if request.image_kind == "multi_peak"
+            else image.array_image(result, request.image_kind),
             n_points=len(result.cloud),
             simulate_s=t1 - t0,
             views_s=time.perf_counter() - t1,

@@ -1,7 +1,7 @@
 """``lmapd app``: serve the browser app (the ``app`` package, installed with ``.[app]``).
 
 lmapd app [--host 127.0.0.1] [--port 8080] [--scene SCENE] [--shared]
-          [--max-sessions N] [--memory-cap-mb MB] [--idle-s S] [--no-spare]
+          [--max-sessions N] [--memory-cap-mb MB] [--idle-s S] [--no-spare] [--no-preview]
 """
 
 from __future__ import annotations
@@ -26,6 +26,9 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     app.add_argument("--memory-cap-mb", type=float, help="the sessions' memory cap [MB]")
     app.add_argument("--idle-s", type=float, help="a closed page's session ends after this [s]")
     app.add_argument("--no-spare", action="store_true", help="start no process ahead")
+    app.add_argument(
+        "--no-preview", action="store_true", help="always wait for the preset's frame (no preview)"
+    )
     app.set_defaults(func=run_cli)
     return app
 
@@ -45,4 +48,5 @@ def run_cli(args: argparse.Namespace) -> int:
             argv += ["--" + option.replace("_", "-"), str(value)]
     argv += ["--shared"] if args.shared else []
     argv += ["--no-spare"] if args.no_spare else []
+    argv += ["--no-preview"] if args.no_preview else []
     return app_main.main(argv) or 0

@@ -221,6 +221,7 @@ html { overflow-y: auto; }
   column-gap: 8px; padding: 0 8px; }
 .image-kind { flex-wrap: wrap; height: auto !important; }
 @media (max-width: 600px) {
+  .v-app-bar .v-toolbar-title { flex: 0 0 auto; }
   .overlay { font-size: 10px; padding: 4px 6px; }
   .colorbar-overlay { min-width: 150px; }
   .legend-count { padding-left: 4px; }
@@ -255,8 +256,7 @@ def app_bar() -> None:
             variant="outlined",
             classes="mr-2 point-count",
         )
-        v3.VChip(  # which frame the views show: the quick preview or the chosen preset's
-            "{{ frame_label }}",
+        with v3.VChip(  # which frame the views show: the quick preview or the chosen preset's
             v_show="frame_label",
             size="small",
             color=("frame_kind === 'preview' ? 'amber-lighten-3' : 'white'",),
@@ -264,7 +264,11 @@ def app_bar() -> None:
             classes="mr-2 frame-kind",
             title="Preview: one ray per pixel, no refinement, shown while the chosen fidelity "
             "preset's frame is computed",
-        )
+        ):
+            html.Span("{{ frame_label }}", classes="d-none d-sm-inline")
+            html.Span(  # a phone's app bar keeps room for the title
+                "{{ frame_kind === 'preview' ? 'preview' : 'preset' }}", classes="d-sm-none"
+            )
         v3.VChip(
             "computing…",
             v_show="busy",

@@ -11,7 +11,7 @@ pytestmark = pytest.mark.browser
 CHIP_LOG = """() => {
   window.lmapdChips = [];
   const chip = document.querySelector('.frame-kind');
-  new MutationObserver(() => window.lmapdChips.push(chip.textContent.trim()))
+  new MutationObserver(() => window.lmapdChips.push(chip.innerText.trim()))
     .observe(chip, { subtree: true, childList: true, characterData: true });
 }"""
 

@@ -14,6 +14,7 @@ import secrets
 import signal
 import sys
 import threading
+from collections.abc import Callable
 
 from trame.app import get_server
 
@@ -229,8 +230,15 @@ def run_launcher(args: argparse.Namespace) -> int:
             flush=True,
         )
 
+    return serve_until_stopped(
+        lambda: asyncio.run(launcher.serve(door, args.host, args.port, announce)), args
+    )
+
+
+def serve_until_stopped(serve: Callable[[], object], args: argparse.Namespace) -> int:
+    """Run ``serve()`` until Ctrl+C; the exit status (2, with one line, if it cannot listen)."""
     try:
-        asyncio.run(launcher.serve(door, args.host, args.port, announce))
+        serve()
     except OSError as exc:  # port in use, bad host
         print(f"lmapd app: cannot listen on {args.host}:{args.port}: {exc}", file=sys.stderr)
         return 2
@@ -257,11 +265,4 @@ def main(argv: list[str] | None = None) -> int:
     if token is not None:
         app.token = token
         signal.signal(signal.SIGTERM, _interrupt)  # the launcher stops its sessions gracefully
-    try:
-        app.start(args.host, args.port)
-    except OSError as exc:  # port in use, bad host
-        print(f"lmapd app: cannot listen on {args.host}:{args.port}: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        pass
-    return 0
+    return serve_until_stopped(lambda: app.start(args.host, args.port), args)

@@ -6,12 +6,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from support.app_helpers import change, settle
+from support.app_helpers import change, small_app
 
 import simcore
 from app.engine import PREVIEW_FIDELITY, Engine, Request
 from app.logic.controller import PREVIEW_LABEL
-from app.main import LmapdApp
 
 
 @pytest.fixture(scope="module")
@@ -21,34 +20,28 @@ def model():
 
 @pytest.fixture
 def app(model):
-    """The paper scene at 64 x 64 with the interactive preset (refinement on), previews on."""
-    scene = simcore.with_overrides(simcore.load_scene(), {"pixels": 64}, preset="interactive")
-    app = LmapdApp(scene, engine=Engine(scene, model=model), flow_control=False, debounce_s=0.0)
-    shown: list[dict] = []
-    apply_preview = app.logic.apply_preview
+    """The paper scene at 64 x 64 with the interactive preset (refinement on), previews on; the
+    previews the page was sent are listed in ``app.previews_shown``."""
+    with small_app(64, model, preset="interactive") as app:
+        shown: list[dict] = []
+        apply_preview = app.logic.apply_preview
 
-    def recording(generation, preview):
-        before = app.logic.n_previews_pushed
-        apply_preview(generation, preview)
-        if app.logic.n_previews_pushed > before:
-            shown.append(
-                {
-                    "generation": generation,
-                    "n_points": app.state.n_points,
-                    "kind": app.state.frame_kind,
-                    "key": app.state.frame_key,
-                }
-            )
+        def recording(generation, preview):
+            before = app.logic.n_previews_pushed
+            apply_preview(generation, preview)
+            if app.logic.n_previews_pushed > before:
+                shown.append(
+                    {
+                        "generation": generation,
+                        "n_points": app.state.n_points,
+                        "kind": app.state.frame_kind,
+                        "key": app.state.frame_key,
+                    }
+                )
 
-    app.logic.apply_preview = recording
-    app.previews_shown = shown
-    app.state.ready()
-    settle(app)
-    try:
+        app.logic.apply_preview = recording
+        app.previews_shown = shown
         yield app
-    finally:
-        app.logic.runner.close()
-        app.uploads.files.cleanup()
 
 
 def test_a_distance_change_shows_the_preview_first_then_the_presets_frame(app, model):

@@ -42,11 +42,13 @@ def change(app: LmapdApp, wait_busy: bool = True, **values) -> None:
 
 
 @contextlib.contextmanager
-def small_app(pixels: int = 48, model=None) -> Iterator[LmapdApp]:
-    """An app on the paper scene at ``pixels`` x ``pixels`` with one ray per pixel, its state
-    ready, frames applied at once (no page to pace them); closed and its uploads removed after.
-    ``model``: an already loaded target to share (else the paper scene's is loaded)."""
-    scene = simcore.with_overrides(simcore.load_scene(), {"pixels": pixels, "fidelity.subrays": 1})
+def small_app(pixels: int = 48, model=None, preset: str | None = None) -> Iterator[LmapdApp]:
+    """An app on the paper scene at ``pixels`` x ``pixels`` with one ray per pixel (or the
+    fidelity ``preset``), its state ready, frames applied at once (no page to pace them); closed
+    and its uploads removed after. ``model``: an already loaded target to share (else the paper
+    scene's is loaded)."""
+    fidelity = {"preset": preset} if preset else {"fidelity.subrays": 1}
+    scene = simcore.with_overrides(simcore.load_scene(), {"pixels": pixels, **fidelity})
     engine = Engine(scene) if model is None else Engine(scene, model=model)
     app = LmapdApp(scene, engine=engine, flow_control=False, debounce_s=0.0)
     app.state.ready()  # fires the change handlers once, like a server start

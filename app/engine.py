@@ -80,8 +80,6 @@ class Preview:
     cloud: dict
     image: dict | None  # None: the image waits for the frame
     n_points: int
-    simulate_s: float
-    views_s: float
 
 
 class Engine:
@@ -159,7 +157,6 @@ class Engine:
 
         Raises StaleRequest like :meth:`compute`.
         """
-        t0 = time.perf_counter()
         try:
             result = self.preview_pipeline.run(self.preview_scene(request.scene), should_stop=stale)
         except simcore.Cancelled:
@@ -170,7 +167,6 @@ class Engine:
             self.preview_pipeline.clear()
         if stale():
             raise StaleRequest
-        t1 = time.perf_counter()
         return Preview(
             cloud=cloud.cloud_view(result, self.frame, request.color_by),
             # the multi-peak marks need every pixel's waveform: they wait for the frame
@@ -178,8 +174,6 @@ class Engine:
             if request.image_kind == "multi_peak"
             else image.array_image(result, request.image_kind),
             n_points=len(result.cloud),
-            simulate_s=t1 - t0,
-            views_s=time.perf_counter() - t1,
         )
 
     def _facets_payload(self, result: simcore.Result) -> tuple[tuple, dict, list[dict]]:

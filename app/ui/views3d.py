@@ -4,9 +4,9 @@ and the point cloud (coloured by range, SNR or outlier flag; outliers always red
 
 Data arrive as binary typed arrays in the trame state (``BINARY_SCRIPT`` makes vtk.js's typed
 arrays of them). The whole mesh is sent once and drawn grey; the facets seen are drawn over it in
-their material colours, as cells of the same points: a new set of seen facets sends only their
-cells and colours, and none is sent while the set stays the same. Each view's camera reset (the
-button, or the 'r' key) goes to the home camera held in the state.
+their material colours (a small mesh of their own: a few thousand facets, their corners and
+colours), sent only when the set of facets seen changes. Each view's camera reset (the button, or
+the 'r' key) goes to the home camera held in the state.
 """
 
 from __future__ import annotations

@@ -48,9 +48,9 @@ log = logging.getLogger(__name__)
 
 MIB = 2**20
 # One session process's resident memory after its first frame with the paper scene at 256 x 256
-# (341-357 MB, median 344 MB, scripts/bench_sessions.py, 2026-11-25); the default session cap is
-# derived from it.
-SESSION_RSS_BYTES = 350 * MIB
+# (354-370 MB, median 357 MB, with its preview's stages, scripts/bench_sessions.py, 2026-11-25);
+# the default session cap is derived from it.
+SESSION_RSS_BYTES = 370 * MIB
 MAX_DEFAULT_SESSIONS = 8
 MEMORY_SHARE = 0.75  # of the memory available at start, for the children together
 FRAME_BYTES = security.WS_CHUNK_BYTES + 4096  # one websocket frame: a wslink chunk and its header

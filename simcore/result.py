@@ -171,6 +171,7 @@ class Result:
                 else d.n_false_per_pixel * self.pixels**2
             ),
             **self._background_summary(),
+            **self.detection.summary_figures,
             "timings_s": dict(self.timings_s),
             "target": {
                 "name": self.target.name,

@@ -77,6 +77,8 @@ class Detection:
     point_attributes : a receiver's own per-point attributes, name -> (values of the lit
         pixels (n,), values of the outliers (n_out,)); the cloud carries them besides its shared
         set (the Geiger-mode receiver's ``counts`` and ``signal_pe``)
+    summary_figures : a receiver's own summary figures, dotted name (with unit) -> JSON value
+        (e.g. ``gm.saturated_pixel_fraction``); :meth:`simcore.result.Result.summary` adds them
     """
 
     p_detect: np.ndarray
@@ -88,6 +90,7 @@ class Detection:
     n_false_per_pixel: float | np.ndarray
     outliers: Outliers
     point_attributes: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    summary_figures: dict[str, object] = field(default_factory=dict)
 
     @property
     def n_false_expected(self) -> float:

@@ -22,9 +22,9 @@ from typing import Any
 
 import tomli_w
 
+from ._assets import ASSETS_DIR
 from .tomlfile import clip, read_toml_file
 
-ASSETS_DIR = Path(__file__).resolve().parent.parent / "assets"
 SCENES_DIR = ASSETS_DIR / "scenes"
 
 
@@ -487,6 +487,19 @@ PRESETS: dict[str, dict[str, Any]] = {
 
 
 @dataclass(frozen=True)
+class Quality:
+    tau_m: float = _f(
+        0.05,
+        "m",
+        0.0,
+        100.0,
+        "distance tolerance tau of the imaging-quality metrics (quality.*: precision, recall, "
+        "F-score; a target point farther than tau from its surface is a ground-truth outlier)",
+        lo_open=True,
+    )
+
+
+@dataclass(frozen=True)
 class Scene:
     name: str = "paper"
     preset: str = _f(
@@ -523,6 +536,7 @@ class Scene:
     orbit: Orbit = field(default_factory=Orbit)
     background: Background = field(default_factory=Background)
     gm: GeigerMode = field(default_factory=GeigerMode)
+    quality: Quality = field(default_factory=Quality)
 
     def __post_init__(self):
         validate(self)
@@ -573,6 +587,7 @@ SECTIONS = {
     "orbit": Orbit,
     "background": Background,
     "gm": GeigerMode,
+    "quality": Quality,
 }
 
 # The quick parameters shared by the CLI --set, the app state and the Python keyword API.

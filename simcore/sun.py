@@ -7,8 +7,8 @@
   ``jplephem``; UTC to TDB through skyfield's built-in leap-second table. Nothing downloads.
 - Orbits: the Table 3 elements (``simcore.orbit``, ECI read as the GCRS of the epoch) or two-line
   element sets through SGP4 (skyfield's ``EarthSatellite``, positions in the GCRS).
-- The Earth's shadow: a cylinder of one Earth radius behind the Earth (no penumbra: the
-  penumbra of a LEO target is about 10 km deep, a few seconds of the orbit).
+- The Earth's shadow: a cylinder of one Earth radius behind the Earth (no penumbra: at 695 km
+  the penumbra is about 28 km wide and the target crosses it in about 9 s).
 
 The model: docs/physics.md#background.
 """

@@ -32,10 +32,28 @@ class SceneError(ValueError):
     """A scene key, value or file is invalid. The message names the key and its valid range."""
 
 
-def _f(default, unit: str, lo=None, hi=None, doc: str = "", choices=None, lo_open=False):
+def _f(
+    default,
+    unit: str,
+    lo=None,
+    hi=None,
+    doc: str = "",
+    choices=None,
+    lo_open=False,
+    zero_or=False,
+):
     """A dataclass field with unit, valid range [lo, hi] (or (lo, hi] if lo_open) and a doc line.
-    ``choices``: the valid values, or a function that returns them (a registry's)."""
-    meta = {"unit": unit, "lo": lo, "hi": hi, "doc": doc, "choices": choices, "lo_open": lo_open}
+    ``choices``: the valid values, or a function that returns them (a registry's). ``zero_or``:
+    0 (meaning "auto" or "the default") is valid besides the range."""
+    meta = {
+        "unit": unit,
+        "lo": lo,
+        "hi": hi,
+        "doc": doc,
+        "choices": choices,
+        "lo_open": lo_open,
+        "zero_or": zero_or,
+    }
     if isinstance(default, (list, dict)):
         raise TypeError("mutable default")
     return field(default=default, metadata=meta)
@@ -67,6 +85,12 @@ class TransmitOptics:
     )
 
 
+# The widest band-pass filter: 300 nm (a filter is tens of nm at most; wider is no filter). With a
+# Sun the band must lie inside the shipped solar table, 900-1700 nm (SOLAR_TABLE_M), which
+# 1064 +- 150 nm does; other laser lines are checked against the table (_check_sun).
+MAX_FILTER_WIDTH_M = 300e-9
+
+
 @dataclass(frozen=True)
 class ReceiveOptics:
     aperture_diameter_m: float = _f(0.5, "m", 0.0, 20.0, "receiver aperture diameter", lo_open=True)
@@ -80,8 +104,9 @@ class ReceiveOptics:
         1e-9,
         "m",
         0.0,
-        1e-6,
-        "band-pass filter full width, a flat top centred on the laser line (background light)",
+        MAX_FILTER_WIDTH_M,
+        "band-pass filter full width, a flat top centred on the laser line (background light); "
+        "with a Sun the band must lie inside the shipped solar spectrum, 900-1700 nm",
         lo_open=True,
     )
     filter_transmittance: float = _f(
@@ -197,10 +222,11 @@ class Target:
     size_m: float = _f(
         0.0,
         "m",
-        0.0,
+        1e-3,
         1e4,
         "the target's real size, its longest bounding-box side (instead of scale_m_per_unit); "
         "0 = the target's own size (a mesh file: 1 m per unit)",
+        zero_or=True,
     )
     material_map: str = _f("", "-", doc="material map TOML; empty = the target's own")
     materials: tuple[tuple[str, str], ...] = _f(
@@ -608,7 +634,8 @@ QUICK = {
 def _range_text(meta) -> str:
     lo, hi = meta["lo"], meta["hi"]
     left = "(" if meta["lo_open"] else "["
-    return f"{left}{lo:g}, {hi:g}] {meta['unit']}".rstrip()
+    zero = "0 or " if meta.get("zero_or") else ""
+    return f"{zero}{left}{lo:g}, {hi:g}] {meta['unit']}".rstrip()
 
 
 def _check_number(key: str, value, meta, integer: bool) -> None:
@@ -620,6 +647,8 @@ def _check_number(key: str, value, meta, integer: bool) -> None:
         raise SceneError(f"{key}: NaN is not a valid value; valid range {_range_text(meta)}")
     lo, hi = meta["lo"], meta["hi"]
     too_low = value <= lo if meta["lo_open"] else value < lo
+    if meta.get("zero_or") and value == 0:
+        return
     if (lo is not None and too_low) or (hi is not None and value > hi):
         raise SceneError(f"{key} = {value!r} is out of range; valid range {_range_text(meta)}")
     if math.isinf(value) and not math.isinf(hi):
@@ -705,7 +734,12 @@ def parse_utc(key: str, text: str) -> datetime.datetime:
         ) from None
     if when.tzinfo is None:
         when = when.replace(tzinfo=datetime.UTC)
-    return when.astimezone(datetime.UTC)
+    try:
+        return when.astimezone(datetime.UTC)
+    except OverflowError:  # e.g. 0001-01-01T00:00+01:00 is before year 1 in UTC
+        raise SceneError(
+            f"{key} = {text!r} is outside the dates this simulator reads (years 1 to 9999 UTC)"
+        ) from None
 
 
 def _check_sun(scene: Scene) -> None:
@@ -718,7 +752,7 @@ def _check_sun(scene: Scene) -> None:
     span = f"the JPL DE421 ephemeris covers {first:%Y-%m-%d} to {last:%Y-%m-%d}"
     if not first <= epoch <= last:
         raise SceneError(f"orbit.epoch_utc = {o.epoch_utc!r} is outside the ephemeris: {span}")
-    if epoch + datetime.timedelta(seconds=o.time_s) > last:
+    if o.time_s > (last - epoch).total_seconds():
         raise SceneError(
             f"orbit.time_s = {o.time_s:g} s after orbit.epoch_utc = {o.epoch_utc!r} is past the "
             f"ephemeris: {span}"
@@ -750,15 +784,29 @@ def tle_lines(key: str, text: str) -> tuple[str, str]:
     if len(lines) != 2:
         raise SceneError(f"{key}: a TLE is two lines (1 ... and 2 ...), got {len(lines)}")
     for number, line in zip("12", lines, strict=True):
+        if not line.isascii():
+            raise SceneError(f"{key}: line {number} has a character that is not ASCII")
         if len(line) != 69 or line[0] != number or line[1] != " ":
             raise SceneError(
                 f"{key}: line {number} must be 69 characters starting with '{number} ', got "
                 f"{line[:20]!r}... ({len(line)} characters)"
             )
-        digits = sum(int(c) for c in line[:68] if c.isdigit()) + line[:68].count("-")
-        if not line[68].isdigit() or digits % 10 != int(line[68]):
+        digits = sum(int(c) for c in line[:68] if c in DIGITS) + line[:68].count("-")
+        if line[68] not in DIGITS or digits % 10 != int(line[68]):
             raise SceneError(f"{key}: line {number} fails its checksum (column 69)")
     return lines[0], lines[1]
+
+
+DIGITS = "0123456789"
+# What SGP4's error codes mean (python-sgp4, ``sgp4.api``: SGP4_ERRORS)
+SGP4_ERRORS = {
+    1: "its mean eccentricity is outside [0, 1) or its semi-major axis below 0.95 Earth radii",
+    2: "its mean motion is negative",
+    3: "its perturbed eccentricity is outside [0, 1]",
+    4: "its semi-latus rectum is negative",
+    5: "its orbit is sub-orbital",
+    6: "its orbit lies inside the Earth (the satellite has decayed)",
+}
 
 
 def check_tle(key: str, text: str, when: datetime.datetime) -> None:
@@ -768,7 +816,11 @@ def check_tle(key: str, text: str, when: datetime.datetime) -> None:
 
     sat = Satrec.twoline2rv(line1, line2)
     if sat.error:
-        raise SceneError(f"{key}: SGP4 cannot read this TLE (error {sat.error})")
+        why = SGP4_ERRORS.get(sat.error, "SGP4 cannot propagate it")
+        raise SceneError(
+            f"{key}: SGP4 cannot use this TLE: {why} (mean motion "
+            f"{sat.no_kozai * 1440 / (2 * math.pi):.4g} rev/day; SGP4 error {sat.error})"
+        )
     jd, fr = jday(when.year, when.month, when.day, when.hour, when.minute, when.second)
     error, r_km, _ = sat.sgp4(jd, fr + when.microsecond / 86400e6)
     if error:

@@ -1,6 +1,7 @@
 """The ``lmapd`` command: simulate one flash, list scene keys, benchmark, serve the app.
 
-    lmapd simulate [SCENE.toml] [--set NAME=VALUE ...] --out cloud.ply
+    lmapd --version
+    lmapd simulate [SCENE.toml | --scene SCENE.toml] [--set NAME=VALUE ...] --out cloud.ply
                    [--summary summary.json] [--waveforms waveforms.npz]
     lmapd keys [--markdown]
     lmapd targets
@@ -37,7 +38,7 @@ from . import (
     target_info,
     targets,
 )
-from .common import EXIT_USAGE, CliError, one_line, say
+from .common import EXIT_USAGE, CliError, merge_scene_option, one_line, say
 
 __all__ = ["EXIT_USAGE", "CliError", "build_parser", "main", "run", "say"]
 
@@ -65,10 +66,38 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="lmapd", description="Space-based LM-APD flash-lidar imaging simulator"
     )
+    parser.add_argument(
+        "--version", action=_VersionAction, help="print the installed version and exit"
+    )
     sub = parser.add_subparsers(dest="command", required=True)
     for module in SUBCOMMANDS:
         module.add_parser(sub)
     return parser
+
+
+def package_version() -> str:
+    """The installed distribution's version (its metadata), or the source tree's when the package
+    runs uninstalled."""
+    from importlib import metadata  # noqa: PLC0415  (only for --version)
+
+    try:
+        return metadata.version("lmapd-sim")
+    except metadata.PackageNotFoundError:
+        from .._version import __version__  # noqa: PLC0415
+
+        return __version__
+
+
+class _VersionAction(argparse.Action):
+    """``--version``: the version read from the package metadata only when asked for (``action=
+    "version"`` would need it while the parser is built, at every command's start)."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS, **kw):
+        super().__init__(option_strings, dest=dest, default=default, nargs=0, **kw)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(f"lmapd {package_version()}")
+        parser.exit()
 
 
 def _user_errors() -> tuple[type[BaseException], ...]:
@@ -84,6 +113,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
+        merge_scene_option(args)
         return args.func(args)
     except KeyboardInterrupt:
         say("lmapd: interrupted", error=True)

@@ -28,10 +28,31 @@ def say(text: str, error: bool = False) -> None:
 
 
 def add_scene_argument(parser: argparse.ArgumentParser) -> None:
-    """The optional positional SCENE (a TOML file or a built-in name)."""
+    """The optional positional SCENE (a TOML file or a built-in name), or the same as ``--scene``
+    (:func:`merge_scene_option` joins the two once parsed)."""
     parser.add_argument(
         "scene", nargs="?", help="scene TOML file or built-in name (default: paper)"
     )
+    parser.add_argument(
+        "--scene",
+        dest="scene_option",
+        metavar="SCENE",
+        help="the same as the positional SCENE (give one or the other)",
+    )
+
+
+def merge_scene_option(args: argparse.Namespace) -> None:
+    """Move ``--scene SCENE`` into ``args.scene`` (the positional's place); CliError when both are
+    given and differ."""
+    option = getattr(args, "scene_option", None)
+    if option is None:
+        return
+    if args.scene is not None and args.scene != option:
+        raise CliError(
+            f"two scenes given: {args.scene!r} and --scene {option!r}; give the scene once, "
+            "as SCENE or as --scene SCENE"
+        )
+    args.scene = option
 
 
 def parse_sets(assignments: list[str] | None) -> dict[str, Any]:

@@ -1,0 +1,1 @@
+"""The app's layout and widgets (trame/Vuetify), one module per part of the page."""

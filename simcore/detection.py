@@ -224,3 +224,80 @@ def draw_limited_stops(
     pix = np.concatenate(out_pixel) if out_pixel else np.zeros(0, np.int64)
     rng_m = np.concatenate(out_range) if out_range else np.zeros(0)
     return echo_stop[np.asarray(echo_pixel)], Outliers(pixel=pix.astype(np.int64), range_m=rng_m)
+
+
+def _capped_stops(rate_per_m, length_m, cap: int, holdoff_m: float, first_delay_m: float = 0.0):
+    """Expected noise stops of a renewal process capped at ``cap`` stops: the i-th stop (i >= 1)
+    comes at first_delay + (i - 1) h + Gamma(i, rate) after the start, so it falls inside
+    ``length_m`` with probability P(Gamma(i, rate) <= length - first_delay - (i - 1) h), the
+    regularised lower incomplete gamma function. Broadcasts over its array arguments [1]."""
+    rate = np.asarray(rate_per_m, dtype=np.float64)
+    length = np.asarray(length_m, dtype=np.float64)
+    total = np.zeros(np.broadcast(rate, length).shape)
+    for i in range(1, int(cap) + 1):
+        free = length - first_delay_m - (i - 1) * holdoff_m
+        term = special.gammainc(i, rate * np.maximum(free, 0.0))
+        total = total + np.where(free > 0.0, term, 0.0)
+        if not np.any(term > 1e-16):  # every later term is smaller
+            break
+    return total
+
+
+def expected_false_points(
+    n_false_per_pixel,
+    n_pixels_total: int,
+    gate_lo_m: float,
+    gate_hi_m: float,
+    max_stops: int,
+    holdoff_m: float,
+    echo_pixel,
+    echo_range_m,
+    p_echo,
+) -> float:
+    """Expected false points in the cloud per flash: the noise stops that the at most K stops
+    per pixel keep (docs/physics.md#false-points), not the noise crossings (Eq. 28) [1].
+
+    Each pixel's noise crossings are a Poisson process of rate nu = n_false / T over the gate;
+    after a stop the pixel is dead for h, so the i-th noise stop of a pixel without an echo falls
+    in the gate with probability P(Gamma(i, nu) <= T - (i - 1) h), and its expected noise stops
+    are the sum of that over i = 1..K. An echo that crosses the threshold (probability P_d) at
+    t_e takes a stop if the pixel is still armed then, which happens with j < K noise stops
+    before it with probability Poisson(j; nu (t_e - j h)); it then leaves K - j - 1 stops for the
+    noise after t_e + h instead of K - j after t_e. With K = 1 this is the first-stop arithmetic:
+    1 - exp(-nu T) in a pixel without an echo, P_d (1 - exp(-nu t_e)) + (1 - P_d)(1 - exp(-nu T))
+    in a lit one.
+
+    n_false_per_pixel : float, or (n_pixels_total,) each pixel's own -- expected noise
+        crossings per pixel over the gate (Eq. 28) [1]
+    gate_lo_m, gate_hi_m : the gate [m]; max_stops : K; holdoff_m : h as range, c h / 2 [m]
+    echo_pixel : (n,) int -- flat index of each lit pixel
+    echo_range_m : (n,) float -- its echo's (noise-free) range [m]; outside the gate: no echo
+    p_echo : (n,) float -- probability that the echo crosses the threshold (Eq. 27) [1]
+    """
+    length_m = float(gate_hi_m - gate_lo_m)
+    if length_m <= 0.0:
+        return 0.0
+    k = int(max_stops)
+    n_false = np.asarray(n_false_per_pixel, dtype=np.float64)
+    rate = n_false / length_m  # noise crossings per metre of range [1/m]
+    per_pixel = _capped_stops(rate, length_m, k, holdoff_m)
+    total = float(per_pixel.sum()) if n_false.ndim else float(per_pixel) * n_pixels_total
+    pixel = np.asarray(echo_pixel, dtype=np.int64)
+    r = np.asarray(echo_range_m, dtype=np.float64)
+    p = np.broadcast_to(np.asarray(p_echo, dtype=np.float64), r.shape)
+    inside = np.isfinite(r) & (r >= gate_lo_m) & (r <= gate_hi_m) & (p > 0)
+    if not inside.any():
+        return total
+    nu = rate[pixel[inside]] if n_false.ndim else np.full(int(inside.sum()), float(rate))
+    t_e, p = r[inside] - gate_lo_m, p[inside]
+    after = length_m - t_e
+    saved = np.zeros_like(t_e)
+    for j in range(k):
+        free = t_e - j * holdoff_m
+        if not (free >= 0.0).any():
+            break
+        armed = np.where(free >= 0.0, _poisson_pmf(j, nu * np.maximum(free, 0.0)), 0.0)
+        without = _capped_stops(nu, after, k - j, holdoff_m)
+        with_echo = _capped_stops(nu, after, k - j - 1, holdoff_m, first_delay_m=holdoff_m)
+        saved += armed * (without - with_echo)
+    return total - float(np.sum(p * saved))

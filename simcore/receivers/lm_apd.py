@@ -207,6 +207,10 @@ def detect(scene: Scene, echo: EchoStage, rx: LmApdResponse) -> LmApdDetection:
         detected = detected & ~rx.saturated  # beyond the linear range: flagged, no point
     r_meas_m = np.where(detected, r_meas_m, np.nan)
     to_w = 1.0 / rx.model.responsivity_a_w
+    false_points = detection.expected_false_points(
+        n_false, scene.detector.pixels**2, lo, hi, t.max_stops, 0.5 * timing.C * holdoff_s,
+        echo.pixel, r_true_m, p_echo,
+    )  # fmt: skip
     return LmApdDetection(
         p_detect=p_d,
         detected=detected,
@@ -219,6 +223,7 @@ def detect(scene: Scene, echo: EchoStage, rx: LmApdResponse) -> LmApdDetection:
         threshold_a=threshold_a,
         threshold_pixel_w=None if threshold_pixel_a is None else threshold_pixel_a * to_w,
         saturated=rx.saturated,
+        summary_figures={"n_false_points_expected": false_points},
     )
 
 

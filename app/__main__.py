@@ -1,5 +1,12 @@
 """``python -m app``: serve the app (same options as ``lmapd app``)."""
 
-from app.main import main
+from app.versions import FrameworkVersionError, check_framework_versions
+
+try:
+    check_framework_versions()  # before the patches of app.security and app.sync are imported
+except FrameworkVersionError as exc:
+    raise SystemExit(f"python -m app: {exc}") from None
+
+from app.main import main  # noqa: E402
 
 raise SystemExit(main())

@@ -35,10 +35,15 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
 
 def run_cli(args: argparse.Namespace) -> int:
     """Serve the app until it is stopped; its exit status."""
+    versions = importlib.import_module("app.versions")  # standard library only
+    try:
+        versions.check_framework_versions()  # before the patches of the framework are imported
+    except versions.FrameworkVersionError as exc:
+        raise CliError(str(exc)) from None
     try:
         app_main = importlib.import_module("app.main")
     except ImportError as exc:
-        raise CliError(f"the app is not installed ({exc}); pip install -e '.[app]'") from None
+        raise CliError(f"the app is not installed ({exc}); {versions.INSTALL_HINT}") from None
     argv = ["--host", args.host, "--port", str(args.port)]
     if args.scene:
         argv += ["--scene", args.scene]

@@ -7,6 +7,6 @@ try:
 except FrameworkVersionError as exc:
     raise SystemExit(f"python -m app: {exc}") from None
 
-from app.main import main  # noqa: E402
+from app.main import main
 
 raise SystemExit(main())

@@ -37,6 +37,7 @@ import signal
 import sys
 import time
 from collections.abc import Callable
+from urllib.parse import quote
 
 import aiohttp
 import psutil
@@ -557,14 +558,10 @@ def _redirect(location: str) -> web.Response:
 
 
 def _q(text: str) -> str:
-    from urllib.parse import quote
-
     return quote(text, safe="")
 
 
 def _path(rest: str) -> str:
-    from urllib.parse import quote
-
     return quote(rest, safe="/-_.~")
 
 
@@ -602,7 +599,7 @@ async def serve(launcher: Launcher, host: str, port: int, announce: Callable[[in
     try:
         site = web.TCPSite(runner, host, port)
         await site.start()
-        sockets = site._server.sockets if site._server else []  # noqa: SLF001 - the bound port
+        sockets = site._server.sockets if site._server else []  # the bound port
         announce(int(sockets[0].getsockname()[1]) if sockets else port)
         await stop.wait()
     finally:

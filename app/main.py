@@ -199,9 +199,9 @@ def _interrupt(*_) -> None:
 
 def run_launcher(args: argparse.Namespace) -> int:
     """Each tab its own session: the launcher (app.launcher) until Ctrl+C or SIGTERM."""
-    import asyncio
+    import asyncio  # noqa: PLC0415  (the launcher's loop: only without --shared)
 
-    from app import launcher
+    from app import launcher  # noqa: PLC0415
 
     mib = launcher.MIB
     caps = launcher.default_caps(

@@ -198,7 +198,7 @@ class Runner(Generic[Request, Value]):
         computing as failed and hand over to a new worker."""
         try:
             self._serve()
-        except BaseException as exc:  # noqa: BLE001 - the worker must survive anything
+        except BaseException as exc:  # the worker must survive anything
             log.exception("the runner's worker died")
             with self._cond:
                 generation = self._computing_generation if self._computing else 0

@@ -39,6 +39,7 @@ from wslink.websocket import LinkProtocol
 
 from app.logic.upload import MAX_UPLOAD_BYTES
 from app.state import MAX_MATERIAL_ENTRIES, echo
+from app.sync import ClientStateSync
 
 log = logging.getLogger(__name__)
 
@@ -348,7 +349,7 @@ class Guard(LinkProtocol):
         }
 
     # -- wslink's hooks --------------------------------------------------------------------------
-    def init(self, publish, addAttachment, stopServer):  # noqa: N803 - wslink's names
+    def init(self, publish, addAttachment, stopServer):  # wslink's names
         """wslink hands every link protocol its handler's ``publish``: wrap that handler."""
         super().init(publish, addAttachment, stopServer)
         handler = getattr(publish, "__self__", None)
@@ -357,7 +358,7 @@ class Guard(LinkProtocol):
             self.sync.clients = self.clients
             self._wrap(handler)
 
-    def onConnect(self, request, client_id):  # noqa: N802 - wslink's name
+    def onConnect(self, request, client_id):  # wslink's name
         getter = getattr(request, "get", None)
         if getter is not None and getter(AUTHORISED, False):
             self.authorised.add(client_id)
@@ -366,14 +367,14 @@ class Guard(LinkProtocol):
         if self.handler is not None:
             self.handler.unchunkers[client_id] = unchunker
 
-    def onClose(self, client_id):  # noqa: N802 - wslink's name
+    def onClose(self, client_id):  # wslink's name
         self.authorised.discard(client_id)
         unchunker = self.unchunkers.pop(client_id, None)
         if unchunker is not None:
             unchunker.release_pending_messages()
         self.sync.forget(client_id)
 
-    async def validateToken(self, token, client_id):  # noqa: N802 - wslink's name
+    async def validateToken(self, token, client_id):  # wslink's name
         """The hello succeeds only on a connection the middleware let in (origin and token)."""
         return client_id in self.authorised
 
@@ -534,8 +535,6 @@ def install(
 ):
     """Lock ``server`` (a trame Server, before it starts) to its own page: returns the guard and
     the door (their counters are read by tests)."""
-    from app.sync import ClientStateSync
-
     limits = limits or Limits()
     sync = ClientStateSync(server.state, client_keys)
     guard = Guard(server, sync, limits)

@@ -27,8 +27,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))  # the drivers: support.*
 
-from playwright.sync_api import sync_playwright  # noqa: E402
-from support.launch import (  # noqa: E402
+from playwright.sync_api import sync_playwright
+from support.launch import (
     CHROMIUM_ARGS,
     CHROMIUM_PATH,
     JS_STATE,
@@ -39,7 +39,7 @@ from support.launch import (  # noqa: E402
     wait_settled,
 )
 
-from app.state import SPECS  # noqa: E402
+from app.state import SPECS
 
 DISTANCES_M = (420.0, 600.0)
 # A pause before each drag: the browser's work after a frame (garbage collection, raster tasks,

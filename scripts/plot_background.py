@@ -20,10 +20,10 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-import simcore  # noqa: E402
+import simcore
 
 LOOK_DOWN = {"pose.quaternion_wxyz": [1.0, 0.0, 0.0, 0.0], "distance_m": 500.0}
 DAY = {"sun.mode": "manual", "sun.azimuth_deg": 0.0, "sun.elevation_deg": 60.0}

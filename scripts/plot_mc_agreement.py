@@ -19,15 +19,15 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))  # support.mc_scene
-import matplotlib  # noqa: E402
+import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from scipy import constants as sc  # noqa: E402
-from support.mc_scene import DT, K_ATT, RX, RX_THERMAL, SCENE, SHAPE, T_D, T_T, B, E  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from scipy import constants as sc
+from support.mc_scene import DT, K_ATT, RX, RX_THERMAL, SCENE, SHAPE, T_D, T_T, B, E
 
-from simcore import detection, echo, montecarlo, timing  # noqa: E402
+from simcore import detection, echo, montecarlo, timing
 
 C = sc.c
 

@@ -18,14 +18,14 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.collections import PolyCollection  # noqa: E402
-from matplotlib.patches import Patch  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.collections import PolyCollection
+from matplotlib.patches import Patch
 
-from simcore.geometry import front_view_rotation, rotation_x, rotation_y  # noqa: E402
-from simcore.scene import Target  # noqa: E402
-from simcore.target import _resolve, load_target  # noqa: E402
+from simcore.geometry import front_view_rotation, rotation_x, rotation_y
+from simcore.scene import Target
+from simcore.target import _resolve, load_target
 
 MATERIAL_COLOURS = {
     "solar_panel": "#1f3fbf",

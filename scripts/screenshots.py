@@ -20,8 +20,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))  # the drivers: support.*
 
-from playwright.sync_api import sync_playwright  # noqa: E402
-from support.launch import (  # noqa: E402
+from playwright.sync_api import sync_playwright
+from support.launch import (
     CHROMIUM_ARGS,
     CHROMIUM_PATH,
     app_server,

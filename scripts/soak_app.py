@@ -19,9 +19,9 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))  # the drivers: support.*
 
-from playwright.sync_api import sync_playwright  # noqa: E402
-from support.launch import CHROMIUM_ARGS, CHROMIUM_PATH, app_server, chromium_missing_message  # noqa: E402
-from support.soak import run_soak  # noqa: E402
+from playwright.sync_api import sync_playwright
+from support.launch import CHROMIUM_ARGS, CHROMIUM_PATH, app_server, chromium_missing_message
+from support.soak import run_soak
 
 MAX_GROWTH_MB = 100.0
 

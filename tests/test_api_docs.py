@@ -77,7 +77,7 @@ def test_the_doc_has_an_example_for_each_part_of_the_api():
 
 @pytest.mark.parametrize(("block", "code"), PYTHON, ids=[i for i, _ in PYTHON])
 def test_each_python_block_runs(notebook, block, code):
-    exec(compile(code, f"{DOC.name} block {block}", "exec"), notebook)  # noqa: S102
+    exec(compile(code, f"{DOC.name} block {block}", "exec"), notebook)
 
 
 def test_the_shown_cloud_has_every_point_and_attribute(notebook):

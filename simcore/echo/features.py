@@ -32,7 +32,7 @@ def preload(shape: PulseShape) -> None:
             from . import kernel  # noqa: PLC0415
 
             kernel.warm(shape)
-        except Exception:  # noqa: BLE001, S110  (compiled_kernel() says why, on use)
+        except Exception:  # compiled_kernel() says why, on use
             pass
 
     _PRELOAD.append(threading.Thread(target=load, name="simcore-kernel", daemon=True))
@@ -52,7 +52,7 @@ def compiled_kernel() -> ModuleType | None:
         else:
             try:
                 from . import kernel  # noqa: PLC0415  (numba: 0.2 s to import)
-            except Exception as exc:  # noqa: BLE001  (any failure to load: the numpy path)
+            except Exception as exc:  # any failure to load: the numpy path
                 reason = f"numba unavailable ({type(exc).__name__}: {exc})"
         if reason:
             _NO_KERNEL[0] = reason

@@ -136,7 +136,7 @@ def _illinois_step(ta, tb, fa, fb, side, tm, fm):
 @_jit()
 def _pixel(
     a, w, n_el, tables, t0_s, inv_step, dt_s, cfd_delay_s, cfd_fraction, t_begin_s, span_s, steps
-):  # noqa: E501
+):
     """Features of one pixel's echo: peak, t_half, |slope|, raw peak, 3 shot levels."""
     filt, filt_slope, raw, raw_slope, shot, shot_slope = tables
     t_first, t_last = a[0], a[0]
@@ -320,7 +320,7 @@ def _sample_rows(out, rows, col0, t_base_s, j0, j1, dt_s, a, w, table, slope, t0
 @_jit()
 def _sample_rows_serial(
     out, rows, col0, t_base_s, j0, j1, dt_s, a, w, table, slope, t0_s, inv, scale
-):  # noqa: E501
+):
     for i in range(len(rows)):
         _sample_row(
             out, rows[i], col0[i], t_base_s[i], j0[i], j1[i], dt_s, a[i], w[i], table, slope,

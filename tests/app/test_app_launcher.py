@@ -57,7 +57,7 @@ async def serving(the_caps: lau.Caps):
     await runner.setup()
     site = web.TCPSite(runner, "127.0.0.1", 0)
     await site.start()
-    port = site._server.sockets[0].getsockname()[1]  # noqa: SLF001
+    port = site._server.sockets[0].getsockname()[1]
     try:
         async with aiohttp.ClientSession() as client:
             yield launcher, f"http://127.0.0.1:{port}", client

@@ -32,7 +32,7 @@ window.run = async (urls) => {
 
 def serve_foreign_page() -> tuple[http.server.ThreadingHTTPServer, str]:
     class Handler(http.server.BaseHTTPRequestHandler):
-        def do_GET(self):  # noqa: N802 - http.server's name
+        def do_GET(self):  # http.server's name
             body = FOREIGN_PAGE.encode()
             self.send_response(200)
             self.send_header("Content-Type", "text/html")

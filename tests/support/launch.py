@@ -119,7 +119,7 @@ def app_process(
     if scene:
         cmd += ["--scene", scene]
     cmd += list(app_args)
-    log_file = open(log_path, "w+b") if log_path else tempfile.TemporaryFile()  # noqa: SIM115
+    log_file = open(log_path, "w+b") if log_path else tempfile.TemporaryFile()
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     proc = subprocess.Popen(cmd, cwd=REPO_DIR, stdout=log_file, stderr=subprocess.STDOUT, env=env)
 

@@ -120,7 +120,7 @@ class Engine:
         t1 = time.perf_counter()
         faces_key, seen_facets, legend = self._facets_payload(result)
         selection = self.selection_for(result, request)
-        summary = result.summary()
+        summary = result.summary(quality=False)  # the mesh distances: not on every frame
         frame = Frame(
             result=result,
             summary=summary,

@@ -17,7 +17,7 @@ from typing import Any
 
 import simcore
 
-COLOR_BY = ("range", "snr", "outlier")
+COLOR_BY = ("range", "snr", "outlier", "range_error", "part")
 IMAGE_KINDS = ("range", "peak_power", "background", "multi_peak")
 SUN_MODES = ("none", "manual", "orbit")  # sun.mode: the paper's dark sky, given, from the orbit
 RECEIVER_KINDS = ("lm_apd", "gm_apd")  # receiver.kind: linear-mode or Geiger-mode array

@@ -229,6 +229,11 @@ _LAS_DESCRIPTIONS = {  # extra-bytes descriptions, at most 32 characters each
     "is_outlier": "1: false alarm, 0: target",
     "counts": "Geiger: counts in peak window",
     "signal_pe": "Geiger: echo pe per pulse",
+    "part_id": "truth: target part (-1: none)",
+    "true_range_m": "truth: noise-free range [m]",
+    "range_error_m": "truth: measured - true range [m]",
+    "incidence_deg": "truth: incidence angle [deg]",
+    "outlier": "truth: false or > tau off (1)",
 }
 
 

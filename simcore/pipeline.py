@@ -21,6 +21,7 @@ from .echo.features import preload
 from .geometry import HITS, RAYS, TARGET
 from .pointcloud import CLOUD
 from .pulse import scene_pulse_shape
+from .quality import QUALITY
 from .receivers import DETECTION, RECEIVER
 from .result import Result, Waveform
 from .scene import Scene, SceneError, with_overrides
@@ -40,6 +41,9 @@ CHAIN: tuple[Stage, ...] = (
     CLOUD,  # points and per-point attributes                      (pointcloud)
 )
 STAGES = tuple(stage.name for stage in CHAIN)
+# stages computed only when asked for (``Pipeline.run(scene, extras=...)``, or on first use
+# through the Result): the imaging-quality metrics against the true mesh     (quality)
+OPTIONAL: dict[str, Stage] = {QUALITY.name: QUALITY}
 
 
 class Cancelled(Exception):
@@ -55,16 +59,26 @@ class Pipeline:
     def clear(self) -> None:
         self._cache.clear()
 
-    def run(self, scene: Scene, should_stop: Callable[[], bool] | None = None) -> Result:
+    def run(
+        self,
+        scene: Scene,
+        should_stop: Callable[[], bool] | None = None,
+        extras: tuple[str, ...] = (),
+    ) -> Result:
         """Run ``scene``; ``should_stop`` is asked before each stage that must compute, and a
-        True answer raises :class:`Cancelled` (the cache keeps every stage finished so far)."""
+        True answer raises :class:`Cancelled` (the cache keeps every stage finished so far).
+        ``extras``: optional stages to run as well (names of OPTIONAL, e.g. "quality")."""
+        unknown = [name for name in extras if name not in OPTIONAL]
+        if unknown:
+            raise ValueError(f"unknown optional stage {unknown[0]!r}: choose from {list(OPTIONAL)}")
         outputs: dict[str, Any] = {}
         keys: dict[str, tuple] = {}
         timings: dict[str, float] = {}
         if "echo" not in self._cache:  # the first frame: the echo kernel loads meanwhile
             preload(scene_pulse_shape(scene))
+        chain = (*CHAIN, *(OPTIONAL[name] for name in extras))
         with parallel.blas_serial():
-            for stage in CHAIN:
+            for stage in chain:
                 keys[stage.name] = (stage.reads(scene), *(keys[u] for u in stage.upstream))
                 outputs[stage.name], timings[stage.name] = self._output(
                     stage, scene, keys[stage.name], outputs, should_stop
@@ -79,6 +93,8 @@ class Pipeline:
             hits=outputs["hits"],
             rays=outputs["rays"],
             timings_s=timings,
+            caster=outputs["target"].caster,
+            extras={name: outputs[name] for name in extras},
         )
 
     def stages_to_run(self, scene: Scene) -> list[str]:

@@ -1,6 +1,7 @@
-"""Point cloud assembly: measured ranges along each pixel's line of sight, plus outliers.
+"""Point cloud assembly: measured ranges along each pixel's line of sight, plus outliers, and
+the ground truth of every point (the part it came from, its true range and error, the incidence).
 
-The model: docs/physics.md#point-cloud.
+The model: docs/physics.md#point-cloud, docs/physics.md#ground-truth.
 """
 
 from __future__ import annotations
@@ -10,11 +11,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .constants import C
+from .pulse import A_FWHM
 from .stage import Stage
 
 if TYPE_CHECKING:
     from .echo import EchoStage
-    from .geometry import RayGrid
+    from .geometry import Hits, RayGrid
     from .receivers import Detection, Response
     from .scene import Scene
 
@@ -27,6 +30,14 @@ ATTRIBUTES = (
     ("material_id", np.int32),
     ("facet_id", np.int32),
     ("is_outlier", np.bool_),
+)
+# the ground truth of every point (NaN / -1 for a false alarm, which no surface produced)
+GROUND_TRUTH = (
+    ("part_id", np.int32),  # the target part of the surface that gave the point
+    ("true_range_m", np.float64),  # the noise-free range of that surface in the pixel [m]
+    ("range_error_m", np.float64),  # measured minus true range [m]
+    ("incidence_deg", np.float64),  # angle between the line of sight and the facet normal
+    ("outlier", np.bool_),  # a false alarm, or a target point more than quality.tau_m off
 )
 
 
@@ -77,10 +88,11 @@ def assemble_cloud(
 
 
 def stage_cloud(
-    scene: Scene, rays: RayGrid, echo: EchoStage, response: Response, det: Detection
+    scene: Scene, rays: RayGrid, hits: Hits, echo: EchoStage, response: Response, det: Detection
 ) -> PointCloud:
     """The cloud stage: detected target pixels at their measured ranges, then the outliers;
-    the shared attributes (ATTRIBUTES) and the receiver's own (``Detection.point_attributes``)."""
+    the shared attributes (ATTRIBUTES), the ground truth (GROUND_TRUTH) and the receiver's own
+    (``Detection.point_attributes``)."""
     k = det.detected
     cloud = assemble_cloud(
         rays.pixel_directions,
@@ -94,14 +106,118 @@ def stage_cloud(
         det.outliers.pixel,
         det.outliers.range_m,
     )
+    truth = ground_truth(
+        echo,
+        hits,
+        np.flatnonzero(k),
+        det.range_m[k],
+        len(det.outliers.pixel),
+        tau_m=scene.quality.tau_m,
+    )
+    cloud.attributes.update(truth)
     for name, (lit_values, outlier_values) in det.point_attributes.items():
         cloud.attributes[name] = np.concatenate([np.asarray(lit_values)[k], outlier_values])
     return cloud
 
 
+def surface_gap_s(echo: EchoStage) -> float:
+    """Two surfaces in one pixel give separate echoes when their delays differ by more than the
+    emitted pulse's FWHM (tau A_FWHM / a, Eq. 1) [s]; closer, one echo carries both."""
+    return echo.shape.tau_s * A_FWHM / echo.shape.a
+
+
+def pixel_surfaces(arrivals_s, weights, gap_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """The surfaces each pixel sees: its echo elements sorted by delay, a new surface wherever
+    the next lit element comes more than ``gap_s`` after the previous one.
+
+    arrivals_s, weights : (n, K) each pixel's element delays [s] and Eq. 30 weights (0: no light)
+    Returns the energy-weighted delay of each surface (n, K) [s] (NaN past a pixel's last
+    surface), in order of delay, and each surface's weight (n, K) [1] (0 there).
+    """
+    a = np.asarray(arrivals_s, dtype=np.float64)
+    w = np.asarray(weights, dtype=np.float64)
+    n, k = w.shape
+    lit = w > 0
+    order = np.argsort(np.where(lit, a, np.inf), axis=1, kind="stable")
+    a, w, lit = (np.take_along_axis(x, order, axis=1) for x in (a, w, lit))
+    new = np.ones((n, k), dtype=bool)
+    new[:, 1:] = a[:, 1:] - a[:, :-1] > gap_s
+    slot = np.arange(n)[:, None] * k + np.cumsum(new, axis=1) - 1
+    weight = np.bincount(slot[lit], w[lit], minlength=n * k).reshape(n, k)
+    moment = np.bincount(slot[lit], (w * a)[lit], minlength=n * k).reshape(n, k)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        delay = np.where(weight > 0, moment / weight, np.nan)
+    return delay, weight
+
+
+def ground_truth(
+    echo: EchoStage,
+    hits: Hits,
+    lit_index,
+    range_m,
+    n_outliers: int,
+    tau_m: float,
+) -> dict[str, np.ndarray]:
+    """The ground truth of the cloud's points: the target points first (lit pixels
+    ``lit_index`` (m,) of ``echo.pixel``, measured at ``range_m`` (m,) [m]), then ``n_outliers``
+    false alarms. The surface that gave a point is the pixel's surface
+    (:func:`pixel_surfaces`) nearest its measured range; its true range is that surface's
+    noise-free energy-weighted range c/2 sum(w t) / sum(w) (Eqs. 29-30), its part and incidence
+    those of the pixel's sub-ray that hit nearest that range. Returns GROUND_TRUTH's arrays,
+    each (m + n_outliers,).
+    """
+    lit_index = np.asarray(lit_index, dtype=np.int64)
+    range_m = np.asarray(range_m, dtype=np.float64)
+    m = len(lit_index)
+    delay_s, _ = pixel_surfaces(
+        echo.arrivals_s[lit_index], echo.weights[lit_index], surface_gap_s(echo)
+    )
+    surface_m = 0.5 * C * delay_s
+    if m:
+        nearest = np.argmin(
+            np.where(np.isnan(surface_m), np.inf, np.abs(surface_m - range_m[:, None])), axis=1
+        )
+        true_m = surface_m[np.arange(m), nearest]
+    else:
+        true_m = np.zeros(0)
+    face, cos_theta = _nearest_subray(hits, echo.pixel[lit_index], true_m)
+    part = np.where(face >= 0, np.asarray(echo.model.face_part)[np.maximum(face, 0)], -1)
+    error_m = range_m - true_m
+    with np.errstate(invalid="ignore"):
+        incidence_deg = np.degrees(np.arccos(np.clip(cos_theta, 0.0, 1.0)))
+    pad_nan = np.full(n_outliers, np.nan)
+    return {
+        "part_id": np.concatenate([part, np.full(n_outliers, -1)]).astype(np.int32),
+        "true_range_m": np.concatenate([true_m, pad_nan]),
+        "range_error_m": np.concatenate([error_m, pad_nan]),
+        "incidence_deg": np.concatenate([np.where(face >= 0, incidence_deg, np.nan), pad_nan]),
+        "outlier": np.concatenate([~(np.abs(error_m) <= tau_m), np.ones(n_outliers, bool)]),
+    }
+
+
+def _nearest_subray(hits: Hits, pixel, range_m) -> tuple[np.ndarray, np.ndarray]:
+    """For each of the pixels ``pixel`` (m,) (flat), the facet and abs(cos) of incidence of
+    its sub-ray whose hit lies nearest ``range_m`` (m,) [m] (-1 and NaN if none hit)."""
+    face = np.full(len(pixel), -1, dtype=np.int64)
+    cos_theta = np.full(len(pixel), np.nan)
+    for block in hits.blocks():
+        if not len(block.pixel):
+            continue
+        row = np.minimum(np.searchsorted(block.pixel, pixel), len(block.pixel) - 1)
+        mine = np.flatnonzero(block.pixel[row] == pixel)
+        if not len(mine):
+            continue
+        r = block.range_m[row[mine]]
+        k = np.argmin(np.abs(np.where(np.isfinite(r), r, np.inf) - range_m[mine, None]), axis=1)
+        take = (row[mine], k)
+        face[mine] = block.face[take]
+        cos_theta[mine] = block.cos_theta[take]
+    return face, cos_theta
+
+
 CLOUD = Stage(
     name="cloud",
-    upstream=("rays", "echo", "receiver", "detection"),
-    reads=lambda s: (),
+    upstream=("rays", "hits", "echo", "receiver", "detection"),
+    reads=lambda s: (s.quality.tau_m,),
     compute=stage_cloud,
 )

@@ -3,12 +3,14 @@ the stage timings), one pixel's echo as a :class:`Waveform`, and the JSON summar
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from . import geometry
+from . import quality as quality_stage
 from .background import Background
 from .echo import EchoStage
 from .pointcloud import PointCloud
@@ -45,6 +47,8 @@ class Result:
     echo, receiver, detection : the outputs of those stages, per lit pixel (aligned with
     ``echo.pixel``); background : the background light per pixel; hits, rays : the ray cast;
     timings_s : seconds per stage (0 = cached).
+    caster : the target's ray caster (the true mesh, for the quality metrics)
+    extras : the optional stages' outputs computed so far, name -> output ("quality")
     """
 
     scene: Scene
@@ -56,6 +60,26 @@ class Result:
     hits: geometry.Hits
     rays: geometry.RayGrid
     timings_s: dict[str, float] = field(default_factory=dict)
+    caster: geometry.RayCaster | None = None
+    extras: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def quality(self) -> dict[str, Any]:
+        """The imaging-quality figures (``simcore.quality``), computed on first use and kept
+        (its time under ``timings_s["quality"]``)."""
+        if "quality" not in self.extras:
+            t0 = time.perf_counter()
+            caster = self.caster if self.caster is not None else geometry.RayCaster(self.target)
+            self.extras["quality"] = quality_stage.quality_metrics(
+                self.cloud,
+                caster,
+                self.hits,
+                self.scene.receive.fov_rad,
+                self.scene.quality.tau_m,
+                self.scene.seed,
+            )
+            self.timings_s["quality"] = time.perf_counter() - t0
+        return self.extras["quality"]
 
     @property
     def points(self) -> np.ndarray:
@@ -141,8 +165,9 @@ class Result:
             "eclipsed": bool(b.eclipsed),
         }
 
-    def summary(self) -> dict[str, Any]:
-        """The JSON summary of DESIGN.md section 3."""
+    def summary(self, quality: bool = True) -> dict[str, Any]:
+        """The JSON summary of DESIGN.md section 3, with the imaging-quality figures under
+        ``quality`` (``quality=False`` leaves them out and skips their cost)."""
         d, r = self.detection, self.receiver
         attrs = self.attributes
         n_out = int(attrs["is_outlier"].sum())
@@ -172,6 +197,7 @@ class Result:
             ),
             **self._background_summary(),
             **self.detection.summary_figures,
+            **({"quality": self.quality} if quality else {}),
             "timings_s": dict(self.timings_s),
             "target": {
                 "name": self.target.name,

@@ -1,4 +1,5 @@
-"""The point cloud's payload: points in the display frame, coloured by range, SNR or kind."""
+"""The point cloud's payload: points in the display frame, coloured by range, SNR, kind, range
+error against the ground truth, or the target part each came from."""
 
 from __future__ import annotations
 
@@ -8,7 +9,9 @@ import simcore
 from app.payloads import encode
 from app.payloads.scene3d import DisplayFrame
 from app.payloads.style import (
+    ERROR_CMAP,
     OUTLIER_COLOR,
+    PART_CMAP,
     PINNED_POINT_COLOR,
     RANGE_CMAP,
     SNR_CMAP,
@@ -42,6 +45,10 @@ def point_colors(result: simcore.Result, target: np.ndarray, color_by: str):
     if color_by == "outlier" or n == 0:
         rgb = np.tile(np.array(encode.rgb_of(TARGET_POINT_COLOR), np.uint8), (n, 1))
         return rgb, None
+    if color_by == "range_error":
+        return _error_colors(attrs["range_error_m"][target])
+    if color_by == "part":
+        return _part_colors(result, attrs["part_id"][target])
     if color_by == "snr":
         values = np.log10(np.maximum(attrs["snr"][target], 1e-12))
         lo, hi = float(values.min()), float(values.max())
@@ -51,6 +58,31 @@ def point_colors(result: simcore.Result, target: np.ndarray, color_by: str):
     lo, hi = float(values.min()), float(values.max())
     bar = colorbar("Range", RANGE_CMAP, f"{lo:.2f} m", f"{hi:.2f} m")
     return encode.colors_of(encode.normalized(values, lo, hi), RANGE_CMAP), bar
+
+
+def _error_colors(error_m: np.ndarray):
+    """Colours of the points' range errors (measured minus true) on a diverging map symmetric
+    about zero, spanning the 95th percentile of |error| (at least 1 mm)."""
+    finite = np.abs(error_m[np.isfinite(error_m)])
+    span_m = max(float(np.percentile(finite, 95.0)) if len(finite) else 0.0, 1e-3)
+    bar = colorbar(
+        "Range error (measured - true)",
+        ERROR_CMAP,
+        f"-{1e3 * span_m:.3g} mm",
+        f"+{1e3 * span_m:.3g} mm",
+    )
+    return encode.colors_of(encode.normalized(error_m, -span_m, span_m), ERROR_CMAP), bar
+
+
+def _part_colors(result: simcore.Result, part_id: np.ndarray):
+    """Colours of the points' target parts, one of PART_CMAP's 20 each; the bar names how many
+    parts the points come from (the materials panel names them)."""
+    lut = encode.colormap_lut(PART_CMAP)
+    slot = (np.maximum(part_id, 0) % 20) * 256 // 20 + 6  # the middle of each of the 20 colours
+    n_parts = len(np.unique(part_id[part_id >= 0]))
+    names = result.target.part_names
+    bar = colorbar("Part", PART_CMAP, f"{n_parts} of {len(names)} parts", "(one colour each)")
+    return lut[slot], bar
 
 
 def cloud_view(result: simcore.Result, frame: DisplayFrame, color_by: str) -> dict:

@@ -206,7 +206,13 @@ def display_choices() -> None:
     labelled_toggle(
         "Colour points by",
         "color_by",
-        [("Range", "range", ""), ("SNR", "snr", ""), ("Outlier flag", "outlier", "")],
+        [
+            ("Range", "range", ""),
+            ("SNR", "snr", ""),
+            ("Outlier flag", "outlier", ""),
+            ("Range error", "range_error", ""),
+            ("Part", "part", ""),
+        ],
     )
 
 

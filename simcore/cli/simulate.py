@@ -56,6 +56,10 @@ def run_cli(args: argparse.Namespace) -> int:
             f"scene {scene.name}",
             f"target {result.target.name}; {result.target.credit}",
             f"material_id indexes: {' '.join(MATERIAL_NAMES)}",
+            f"part_id indexes: {' | '.join(result.target.part_names)}",
+            "ground truth: true_range_m, range_error_m (measured - true) [m], incidence_deg "
+            f"[deg], outlier (a false alarm or more than quality.tau_m = "
+            f"{scene.quality.tau_m:g} m off its surface)",
         )
         io.write_cloud(staged["--out"], result.cloud, comments)
         if "--waveforms" in staged:

@@ -31,7 +31,8 @@ def frame_metrics(result: Result) -> dict[str, Any]:
     """The table's metric columns (METRICS) of one frame; None where a statistic has no sample.
 
     SNR quantiles are over the lit pixels (``result.receiver.snr``), range sigma quantiles over
-    the detected target pixels (``result.detection.range_sigma_m``) [m].
+    the detected target pixels (``result.detection.range_sigma_m``) [m]; the ``quality.*``
+    columns are the summary's imaging-quality figures (``simcore.quality``).
     """
     s = result.summary()
     snr = _finite(result.receiver.snr)
@@ -45,6 +46,11 @@ def frame_metrics(result: Result) -> dict[str, Any]:
         "snr_p90": _quantile(snr, 0.90),
         "range_sigma_m_median": _quantile(sigma, 0.50),
         "range_sigma_m_p90": _quantile(sigma, 0.90),
+        **{
+            name: s["quality"][name.partition(".")[2]]
+            for name, _, _ in METRICS
+            if name.startswith("quality.")
+        },
     }
 
 

@@ -53,6 +53,15 @@ METRICS = (
     ("snr_p90", "float64", "90th percentile of the lit pixels' SNR"),
     ("range_sigma_m_median", "float64", "median range sigma of the detected pixels [m]"),
     ("range_sigma_m_p90", "float64", "90th percentile range sigma of the detected pixels [m]"),
+    # the imaging quality against the true mesh (simcore.quality), at the frame's quality.tau_m
+    ("quality.precision", "float64", "share of target points within tau of the true mesh"),
+    ("quality.recall", "float64", "share of the seen surface within tau of a point"),
+    ("quality.f_score", "float64", "harmonic mean of precision and recall"),
+    ("quality.range_bias_m", "float64", "median signed range error of the target points [m]"),
+    ("quality.range_rmse_m", "float64", "RMS range error of the target points [m]"),
+    ("quality.range_error_p95_m", "float64", "95th percentile of |range error| [m]"),
+    ("quality.outlier_fraction", "float64", "share of points farther than tau from truth"),
+    ("quality.point_density_per_m2", "float64", "target points per m^2 of seen surface"),
 )
 
 

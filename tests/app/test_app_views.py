@@ -157,13 +157,42 @@ def test_the_cloud_view_splits_target_points_from_outliers(frame):
     assert cloud["colorbar"]["title"] == "Range"
 
 
-@pytest.mark.parametrize("color_by", ["range", "snr", "outlier"])
+@pytest.mark.parametrize("color_by", ["range", "snr", "outlier", "range_error", "part"])
 def test_every_colouring_gives_one_colour_per_target_point(frame, color_by):
     result = frame.result
     target = ~result.attributes["is_outlier"]
     rgb, bar = cloud.point_colors(result, target, color_by)
     assert rgb.shape == (int(target.sum()), 3) and rgb.dtype == np.uint8
     assert (bar is None) == (color_by == "outlier")
+
+
+def test_range_error_colours_are_symmetric_about_the_truth(frame):
+    result = frame.result
+    target = ~result.attributes["is_outlier"]
+    error_m = result.attributes["range_error_m"][target]
+    rgb, bar = cloud.point_colors(result, target, "range_error")
+    assert bar["title"].startswith("Range error")
+    assert (
+        bar["lo"].startswith("-") and bar["hi"].startswith("+") and bar["lo"][1:] == bar["hi"][1:]
+    )
+    lut = encode.colormap_lut(style.ERROR_CMAP)
+    # the point nearest its truth is drawn in the map's middle colour (within one step of it)
+    centre = rgb[np.argmin(np.abs(error_m))].astype(int)
+    assert (
+        np.abs(centre - lut[128].astype(int)).max() <= np.abs(lut[129].astype(int) - lut[127]).max()
+    )
+
+
+def test_points_of_one_part_share_one_colour_and_two_parts_differ(frame):
+    result = frame.result
+    target = ~result.attributes["is_outlier"]
+    part = result.attributes["part_id"][target]
+    rgb, bar = cloud.point_colors(result, target, "part")
+    assert bar["title"] == "Part"
+    parts = np.unique(part)
+    assert len(parts) >= 2
+    colours = [np.unique(rgb[part == p], axis=0) for p in parts[:2]]
+    assert all(len(c) == 1 for c in colours) and not np.array_equal(colours[0], colours[1])
 
 
 def test_an_empty_point_set_is_one_hidden_point():

@@ -12,7 +12,7 @@ import pytest
 
 import simcore
 from simcore import io
-from simcore.pointcloud import ATTRIBUTES, PointCloud
+from simcore.pointcloud import ATTRIBUTES, GROUND_TRUTH, PointCloud
 
 HALF_STEP_M = io.LAS_SCALE_M / 2  # worst rounding of a LAS coordinate at the 0.1 mm scale
 FLOAT_SLACK_M = 1e-9  # double rounding of (x - offset) / scale at 100 km is ~1e-11 m
@@ -107,8 +107,29 @@ def test_the_las_header_is_version_1_4_format_6_with_extra_dimensions(tmp_path, 
     assert h.system_identifier == "lmapd-sim simulation"
     assert h.generating_software == f"lmapd-sim {simcore.__version__}"
     assert h.global_encoding.wkt
-    assert set(las.point_format.extra_dimension_names) == {n for n, _ in ATTRIBUTES}
+    assert set(las.point_format.extra_dimension_names) == {
+        n for n, _ in (*ATTRIBUTES, *GROUND_TRUTH)
+    }
     assert any("NASA/JPL-Caltech" in line for line in io.read_cloud_comments(path))
+
+
+def test_the_ground_truth_travels_in_ply_and_las_with_units_in_the_las_descriptions(
+    tmp_path, result
+):
+    described = {}
+    for suffix in ("ply", "las"):
+        path = tmp_path / f"truth.{suffix}"
+        io.write_cloud(path, result.cloud)
+        back = io.read_cloud(path)
+        for name, dtype in GROUND_TRUTH:
+            want = np.asarray(result.attributes[name])
+            assert np.array_equal(back.attributes[name], want, equal_nan=dtype is not np.bool_)
+        if suffix == "las":
+            described = {
+                d.name: d.description for d in laspy.read(str(path)).point_format.extra_dimensions
+            }
+    assert "[m]" in described["true_range_m"] and "[m]" in described["range_error_m"]
+    assert "[deg]" in described["incidence_deg"]
 
 
 def test_las_classes_outliers_as_noise_and_target_points_as_class_1(tmp_path):

@@ -1,0 +1,260 @@
+"""Imaging-quality metrics: how good a point cloud is against the target it came from.
+
+The figures follow the multi-view-stereo benchmarks (Tanks and Temples, ETH3D): at a distance
+tolerance tau (``quality.tau_m``)
+
+- precision: the share of the cloud's target points within tau of the true mesh (exact
+  point-to-mesh distance, point-cloud-utils' BVH);
+- recall (completeness): the share of the *visible* true surface within tau of a point; the
+  surface is sampled uniformly by area over the facets the lidar sees, and a sample counts only
+  if it lies inside the array's field of view and nothing hides it from the lidar (a ray cast to
+  it, Embree);
+- F-score: their harmonic mean;
+
+and along the lines of sight, from each point's ground truth (``simcore.pointcloud.ground_truth``):
+the median signed range error (bias), its RMS, the 95th percentile of its magnitude, the share of
+ground-truth outliers among all points, and the target points per square metre of seen surface.
+Per part: points, precision, recall and bias.
+
+This is a stage of its own (:data:`QUALITY`), computed only when a summary, a sweep column or the
+app asks for it. The model: docs/physics.md#imaging-quality.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .geometry import RayCaster
+from .stage import Stage
+
+if TYPE_CHECKING:
+    from .geometry import Hits, PoseInSensor, TargetStage
+    from .pointcloud import PointCloud
+    from .scene import Scene
+    from .target import TargetModel
+
+SURFACE_SAMPLES = 50_000  # samples of the seen facets for recall (its standard error <= 0.0023)
+SEEN_SLACK_M = 1e-3  # a sample whose ray hits within this of it is seen (float32 ray distances)
+
+
+@dataclass(frozen=True, kw_only=True)
+class SurfaceSamples:
+    """Points spread uniformly by area over some facets, and which of them the lidar sees.
+
+    points_t : (n, 3) float64 positions, target frame [m]
+    face : (n,) int64 facet of each sample
+    seen : (n,) bool inside the field of view and not hidden from the lidar
+    area_m2 : total area of the sampled facets [m^2]
+    """
+
+    points_t: np.ndarray
+    face: np.ndarray
+    seen: np.ndarray
+    area_m2: float
+
+    @property
+    def seen_area_m2(self) -> float:
+        """The seen share of the sampled area [m^2]."""
+        return self.area_m2 * float(np.mean(self.seen)) if len(self.seen) else 0.0
+
+
+def facet_areas_m2(vertices_m, faces) -> np.ndarray:
+    """(n_faces,) area of each triangle [m^2] (0 for a degenerate one)."""
+    v = np.asarray(vertices_m, dtype=np.float64)[np.asarray(faces)]
+    return 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+
+
+def sample_facets(vertices_m, faces, face_ids, n: int, rng: np.random.Generator):
+    """``n`` points uniform by area over the facets ``face_ids``: (n, 3) positions [m], (n,)
+    facet of each, and the facets' total area [m^2]. None of them if the facets have no area."""
+    face_ids = np.asarray(face_ids, dtype=np.int64)
+    tri = np.asarray(vertices_m, dtype=np.float64)[np.asarray(faces)[face_ids]]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    total = float(area.sum())
+    if not len(face_ids) or not total > 0:
+        return np.zeros((0, 3)), np.zeros(0, np.int64), 0.0
+    pick = rng.choice(len(face_ids), size=n, p=area / total)
+    u, v = rng.random(n), rng.random(n)
+    s = np.sqrt(u)  # uniform over a triangle: (1 - sqrt u, sqrt u (1 - v), sqrt u v)
+    t = tri[pick]
+    points = (1.0 - s)[:, None] * t[:, 0] + (s * (1.0 - v))[:, None] * t[:, 1]
+    points += (s * v)[:, None] * t[:, 2]
+    return points, face_ids[pick], total
+
+
+def seen_surface(
+    caster: RayCaster,
+    pose: PoseInSensor,
+    fov_rad: float,
+    face_ids,
+    n: int,
+    rng: np.random.Generator,
+) -> SurfaceSamples:
+    """Samples of the facets ``face_ids`` and which the lidar sees: inside the square field of
+    view ``fov_rad`` and first along the ray from the lidar (within SEEN_SLACK_M)."""
+    model = caster.model
+    points_t, face, area = sample_facets(model.vertices_m, model.faces, face_ids, n, rng)
+    if not len(points_t):
+        return SurfaceSamples(points_t=points_t, face=face, seen=np.zeros(0, bool), area_m2=0.0)
+    origin_t = -pose.rotation.T @ pose.translation_m
+    offset = points_t - origin_t
+    dist_m = np.linalg.norm(offset, axis=1)
+    dirs_t = offset / dist_m[:, None]
+    dirs_s = dirs_t @ pose.rotation.T  # R d for each row: the sensor frame
+    half = np.tan(fov_rad / 2.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        in_view = (dirs_s[:, 2] > 0) & (np.abs(dirs_s[:, 0]) <= half * dirs_s[:, 2])
+        in_view &= np.abs(dirs_s[:, 1]) <= half * dirs_s[:, 2]
+    start = max(0.0, float(np.linalg.norm(pose.translation_m)) - 1.05 * model.radius_m)
+    seen = np.zeros(len(points_t), dtype=bool)
+    look = np.flatnonzero(in_view)
+    if len(look):
+        hit_m, _ = caster.first_hits(origin_t, dirs_t[look], start)
+        seen[look] = hit_m >= dist_m[look] - SEEN_SLACK_M
+    return SurfaceSamples(points_t=points_t, face=face, seen=seen, area_m2=area)
+
+
+def point_to_mesh_m(points_t, vertices_m, faces) -> np.ndarray:
+    """(n,) exact distance of each point (n, 3) to the nearest of the triangles ``faces`` (m, 3)
+    of ``vertices_m`` [m] (point-cloud-utils' BVH), inf where there is no triangle."""
+    import point_cloud_utils as pcu  # noqa: PLC0415  (only when quality is asked for)
+
+    points_t = np.ascontiguousarray(points_t, dtype=np.float64)
+    if not len(points_t) or not len(faces):
+        return np.full(len(points_t), np.inf)
+    vertices = np.ascontiguousarray(vertices_m, dtype=np.float64)
+    faces = np.ascontiguousarray(faces, dtype=np.int32)
+    distance, _, _ = pcu.closest_points_on_mesh(points_t, vertices, faces)
+    return np.abs(np.asarray(distance, dtype=np.float64)).reshape(len(points_t))  # (1,) too
+
+
+def near_mesh(points_t, model: TargetModel, tau_m: float, seen_faces) -> np.ndarray:
+    """(n,) bool: each point (target frame) lies within ``tau_m`` of the mesh, exactly.
+
+    Most points lie by the facets the lidar sees: their distance to those (``seen_faces``) is an
+    upper bound of the distance to the mesh, so a point within tau of them is near. The others
+    are measured against every triangle that could be within tau of one of them (one of them
+    lies within tau plus half its bounding box's diagonal of the box's centre), which is all
+    that the answer depends on.
+    """
+    vertices = np.asarray(model.vertices_m, dtype=np.float64)
+    faces = np.asarray(model.faces)
+    near = point_to_mesh_m(points_t, vertices, faces[np.asarray(seen_faces)]) <= tau_m
+    rest = np.flatnonzero(~near)
+    if len(rest):
+        tri = vertices[faces]
+        lo, hi = tri.min(axis=1), tri.max(axis=1)
+        reach_m = tau_m + 0.5 * np.linalg.norm(hi - lo, axis=1)
+        d_m, _ = cKDTree(points_t[rest]).query(0.5 * (lo + hi), k=1)
+        could = d_m <= reach_m
+        near[rest] = point_to_mesh_m(points_t[rest], vertices, faces[could]) <= tau_m
+    return near
+
+
+def to_target_frame(points_s, pose: PoseInSensor) -> np.ndarray:
+    """Sensor-frame points (n, 3) in the target frame: R^T (p - t)."""
+    return (np.asarray(points_s, dtype=np.float64) - pose.translation_m) @ pose.rotation
+
+
+def _ratio(num: float, den: float) -> float:
+    return float(num / den) if den > 0 else 0.0
+
+
+def _errors(error_m: np.ndarray) -> dict[str, float | None]:
+    """Bias (median), RMS and 95th percentile of |error| of some range errors [m]; None if none."""
+    e = error_m[np.isfinite(error_m)]
+    if not len(e):
+        return {"range_bias_m": None, "range_rmse_m": None, "range_error_p95_m": None}
+    return {
+        "range_bias_m": float(np.median(e)),
+        "range_rmse_m": float(np.sqrt(np.mean(e * e))),
+        "range_error_p95_m": float(np.percentile(np.abs(e), 95.0)),
+    }
+
+
+def quality_metrics(
+    cloud: PointCloud,
+    caster: RayCaster,
+    hits: Hits,
+    fov_rad: float,
+    tau_m: float,
+    seed: int,
+    n_samples: int = SURFACE_SAMPLES,
+) -> dict[str, Any]:
+    """The ``quality.*`` figures of one frame (see the module's docstring), plain JSON values.
+
+    cloud : the frame's points (sensor frame) with their ground truth
+    caster : the target's ray caster (its model is the true mesh)
+    hits : the frame's first hits (the seen facets and the pose)
+    """
+    model = caster.model
+    attrs = cloud.attributes
+    target = ~np.asarray(attrs["is_outlier"], dtype=bool)
+    points_t = to_target_frame(cloud.points[target], hits.pose)
+    near = near_mesh(points_t, model, tau_m, hits.visible_faces)
+    rng = np.random.default_rng([seed, 7411])
+    surface = seen_surface(caster, hits.pose, fov_rad, hits.visible_faces, n_samples, rng)
+    recalled = np.zeros(len(surface.face), dtype=bool)
+    if len(points_t) and surface.seen.any():
+        d_m, _ = cKDTree(points_t).query(surface.points_t[surface.seen], k=1)
+        recalled[surface.seen] = d_m <= tau_m
+    precision = _ratio(near.sum(), len(near))
+    recall = _ratio(recalled.sum(), surface.seen.sum())
+    f_score = 2 * precision * recall / (precision + recall) if precision + recall > 0 else 0.0
+    error_m = np.asarray(attrs["range_error_m"])[target]
+    seen_m2 = surface.seen_area_m2
+    figures: dict[str, Any] = {
+        "tau_m": float(tau_m),
+        "precision": precision,
+        "recall": recall,
+        "f_score": float(f_score),
+        **_errors(error_m),
+        "outlier_fraction": _ratio(np.count_nonzero(attrs["outlier"]), len(cloud)),
+        "point_density_per_m2": _ratio(len(points_t), seen_m2),
+        "seen_area_m2": seen_m2,
+        "n_surface_samples": int(surface.seen.sum()),
+    }
+    figures["parts"] = _per_part(model, attrs, target, near, surface, recalled, error_m)
+    return figures
+
+
+def _per_part(model, attrs, target, near, surface, recalled, error_m) -> list[dict[str, Any]]:
+    """Per part that is seen or gives points: name, points, precision, recall, bias."""
+    part_of_point = np.asarray(attrs["part_id"])[target]
+    face_part = np.asarray(model.face_part)
+    sample_part = face_part[surface.face] if len(surface.face) else np.zeros(0, np.int64)
+    rows = []
+    for p, name in enumerate(model.part_names):
+        mine = part_of_point == p
+        seen = surface.seen & (sample_part == p)
+        if not mine.any() and not seen.any():
+            continue
+        rows.append(
+            {
+                "name": name,
+                "n_points": int(mine.sum()),
+                "precision": _ratio(near[mine].sum(), mine.sum()),
+                "recall": _ratio(recalled[seen].sum(), seen.sum()),
+                "range_bias_m": _errors(error_m[mine])["range_bias_m"],
+            }
+        )
+    return rows
+
+
+def stage_quality(scene: Scene, tgt: TargetStage, hits: Hits, cloud: PointCloud) -> dict:
+    """The quality stage: :func:`quality_metrics` of the frame at ``quality.tau_m``."""
+    return quality_metrics(
+        cloud, tgt.caster, hits, scene.receive.fov_rad, scene.quality.tau_m, scene.seed
+    )
+
+
+QUALITY = Stage(
+    name="quality",
+    upstream=("target", "hits", "cloud"),
+    reads=lambda s: (s.quality.tau_m, s.seed, s.receive.fov_rad),
+    compute=stage_quality,
+)

@@ -19,6 +19,7 @@ The model: docs/physics.md#geiger-mode.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,8 +32,8 @@ from ..scene import Scene, SceneError
 from . import Detection, Receiver, Response, register
 from . import gm_events as ev
 from . import gm_histogram as gh
+from .gm_limits import BYTES_PER_EVENT, MAX_EVENTS, armed_probability
 
-MAX_EVENTS = 100_000_000  # expected avalanches per frame at most (~1.3 GB of event records)
 MAX_EVENTS_PER_PULSE = 10_000  # expected avalanches of one pixel in one gate at most
 ECHO_TAIL_SCALES = 12.0  # the analysis window runs 12 s past the echo (Gamma(2) tail 8e-5)
 JITTER_REACH = 4.0  # jitter standard deviations the windows allow either side
@@ -121,7 +122,7 @@ def _check_load(scene: Scene, signal_pe, rate_hz, lit_pixel) -> None:
     primaries = rate_hz * gate_s
     primaries[lit_pixel] += signal_pe
     cap = 1.0 + gate_s / gm.dead_time_s if gm.dead_time_s > 0 else np.inf
-    per_gate = np.minimum(primaries, cap) / (1.0 - gm.afterpulsing)
+    per_gate = np.minimum(primaries, cap) * (1.0 + gm.crosstalk) / (1.0 - gm.afterpulsing)
     worst = float(per_gate.max()) if len(per_gate) else 0.0
     if worst > MAX_EVENTS_PER_PULSE:
         raise SceneError(
@@ -132,8 +133,9 @@ def _check_load(scene: Scene, signal_pe, rate_hz, lit_pixel) -> None:
     total = float(per_gate.sum()) * gm.pulses
     if total > MAX_EVENTS:
         raise SceneError(
-            f"gm.pulses = {gm.pulses} gives about {total:.3g} avalanches per frame (at most "
-            f"{MAX_EVENTS:,}): fewer pulses, a longer gm.dead_time_s, fewer pixels or a shorter "
+            f"gm.pulses = {gm.pulses} gives about {total:.3g} avalanches per frame, "
+            f"{total * BYTES_PER_EVENT / 2**30:.3g} GiB to simulate (at most {MAX_EVENTS:,}): "
+            "fewer pulses, a longer gm.dead_time_s, fewer pixels or a shorter "
             "timing.range_gate_m"
         )
 
@@ -223,15 +225,14 @@ def window_fraction(scene: Scene, echo: EchoStage) -> float:
     gm = scene.gm
     s = echo.shape.tau_s / echo.shape.a
     w_s = window_bins(scene, echo) * gm.bin_s
-    t = np.linspace(-JITTER_REACH * gm.jitter_s, ECHO_TAIL_SCALES * s, 4001)
+    reach_s = JITTER_REACH * gm.jitter_s
+    t = np.linspace(-reach_s, ECHO_TAIL_SCALES * s + reach_s, 4001)
     dt = t[1] - t[0]
-    x = np.maximum(t / s, 0.0)
-    pdf = x * np.exp(-x) / s
-    k = np.arange(-JITTER_REACH * gm.jitter_s, JITTER_REACH * gm.jitter_s + dt, dt)
-    if len(k) > 1:
-        kern = np.exp(-0.5 * (k / gm.jitter_s) ** 2)
-        pdf = np.convolve(pdf, kern / kern.sum(), mode="same")
-    cdf = np.cumsum(pdf) * dt
+    cdf = ev.gamma2_cdf(t / s)  # exact on the grid; the jitter's pmf on the same step
+    m = int(reach_s // dt)
+    if m >= 1:
+        kern = np.exp(-0.5 * (dt * np.arange(-m, m + 1) / gm.jitter_s) ** 2)
+        cdf = np.convolve(np.pad(cdf, m, mode="edge"), kern / kern.sum(), mode="valid")
     return float(np.max(np.interp(t + w_s, t, cdf, right=cdf[-1]) - cdf))
 
 
@@ -258,16 +259,21 @@ def threshold_counts(mu_window, n_windows: float, p_fa: float) -> np.ndarray:
 
 def _expected_window_counts(scene: Scene, echo: EchoStage, signal_pe, rate_lit_hz):
     """(n,) expected signal and background counts of the frame in each lit pixel's peak
-    window: N a (1 - exp(-f N_s)) and N r w, with a the pixel's chance to be armed when the echo
-    comes, exp(-r min(t_echo, d)) (exact for first-photon detection)."""
+    window: N a (1 - exp(-f N_s)) and N a r w, with a the pixel's chance to be armed when the
+    echo comes (:func:`gm_limits.armed_probability`: the background's renewal process since
+    the gate opened, e^{-r t} within the first dead time)."""
     gm = scene.gm
-    t_lo, _ = _gate_s(scene)
-    t_echo = np.maximum(_echo_span_s(echo)[0] - t_lo, 0.0)
-    armed = np.exp(-rate_lit_hz * np.minimum(t_echo, gm.dead_time_s))
+    armed = echo_armed_probability(scene, echo, rate_lit_hz)
     f = window_fraction(scene, echo)
     s_counts = gm.pulses * armed * -np.expm1(-f * signal_pe)
-    b_counts = gm.pulses * rate_lit_hz * window_bins(scene, echo) * gm.bin_s
+    b_counts = gm.pulses * armed * rate_lit_hz * window_bins(scene, echo) * gm.bin_s
     return s_counts, b_counts
+
+
+def echo_armed_probability(scene: Scene, echo: EchoStage, rate_lit_hz) -> np.ndarray:
+    """(n,) each lit pixel's chance to be armed when its echo's first element arrives."""
+    t_echo = np.maximum(_echo_span_s(echo)[0] - _gate_s(scene)[0], 0.0)
+    return armed_probability(rate_lit_hz, t_echo, scene.gm.dead_time_s)
 
 
 def _echo_span_s(echo: EchoStage) -> tuple[np.ndarray, np.ndarray]:
@@ -309,6 +315,7 @@ def detect(scene: Scene, echo: EchoStage, rx: GmResponse) -> GmDetection:
     t_mean_s = rx.gate_start_s + est.t_s
     # range: the centroid less the mean photon delay of Eq. 1's pulse, 2 s (Gamma(2, s))
     r_est_m = 0.5 * C * (t_mean_s - 2.0 * s_scale)
+    r_est_m = np.where(_inside_gate(scene, r_est_m), r_est_m, np.nan)
 
     lit_of = np.full(n_pixels, -1, dtype=np.int64)
     lit_of[echo.pixel] = np.arange(len(echo.pixel))
@@ -364,6 +371,59 @@ def detect(scene: Scene, echo: EchoStage, rx: GmResponse) -> GmDetection:
     )
 
 
+def _inside_gate(scene: Scene, range_m) -> np.ndarray:
+    """Whether each range lies inside the range gate (a processor reports no range before the
+    gate opens or after it closes: a centroid less the pulse's mean delay can fall there)."""
+    t_lo, t_len = _gate_s(scene)
+    return (range_m >= 0.5 * C * t_lo) & (range_m <= 0.5 * C * (t_lo + t_len))
+
+
+def frame_warnings(scene: Scene, echo: EchoStage, rx: GmResponse, d: GmDetection) -> list[str]:
+    """One line for each way a Geiger-mode frame's figures can mislead: a threshold most lit
+    pixels cannot reach, pixels blinded by the background's dead time, detections ranged
+    outside the gate."""
+    gm, t = scene.gm, scene.timing
+    out = []
+    lit_k = np.asarray(d.threshold_counts)[echo.pixel]
+    beyond = lit_k > gm.pulses
+    if len(lit_k) and np.count_nonzero(beyond) * 2 > len(lit_k):
+        out.append(
+            f"{np.count_nonzero(beyond)} of {len(lit_k)} lit pixels cannot be detected: "
+            f"timing.tnr = {t.tnr:g} sets their threshold (median {np.median(lit_k):.0f} "
+            f"counts) above gm.pulses = {gm.pulses} (a window holds one avalanche a pulse); "
+            "more gm.pulses or a lower timing.tnr"
+        )
+    armed = echo_armed_probability(scene, echo, rx.rate_hz[echo.pixel])
+    if len(armed) and np.median(armed) < 0.5:
+        out.append(
+            f"the background and dark counts keep most lit pixels dead (gm.dead_time_s = "
+            f"{gm.dead_time_s:g} s) when their echo arrives (median chance to be armed "
+            f"{np.median(armed):.2g}): a shorter gm.dead_time_s, a narrower "
+            "receive.filter_width_m or a gate that opens nearer the target"
+        )
+    over = np.asarray(d.peak_counts) >= lit_k
+    lost = over & ~np.asarray(d.detected)
+    lost[np.isin(echo.pixel, d.outliers.pixel)] = False
+    if lost.any():
+        out.append(
+            f"{int(lost.sum())} lit pixels passed the threshold but their range fell outside "
+            "the gate or had no excess over the background: no point (a piled-up echo "
+            "ranges early)"
+        )
+    return out
+
+
+def _detect_with_warnings(scene: Scene, echo: EchoStage, rx: GmResponse) -> GmDetection:
+    """:func:`detect`, its summary figures joined by the frame's warnings (a list of lines)."""
+    d = detect(scene, echo, rx)
+    lines = frame_warnings(scene, echo, rx, d)
+    if not lines:
+        return d
+    figures = dict(d.summary_figures)
+    figures["warnings"] = [*figures.get("warnings", []), *lines]
+    return dataclasses.replace(d, summary_figures=figures)
+
+
 def frame_detection_probability(scene: Scene, echo: EchoStage, rx: GmResponse) -> np.ndarray:
     """(n,) predicted P_d of each lit pixel for a frame of ``scene.gm.pulses`` pulses (its own
     threshold included): the pulses a given P_d needs, without simulating them."""
@@ -384,7 +444,8 @@ def _predicted(scene: Scene, echo: EchoStage, rx: GmResponse, k_t):
     s_counts, b_counts = _expected_window_counts(scene, echo, rx.signal_pe, rx.rate_hz[echo.pixel])
     p = np.clip((s_counts + b_counts) / gm.pulses, 0.0, 1.0)
     p_d = special.bdtrc(k_t - 1.0, gm.pulses, p)
-    p_d = np.where(k_t <= 0, 1.0, p_d)
+    # a window holds at most one avalanche a pulse: more counts than pulses are out of reach
+    p_d = np.where(k_t <= 0, 1.0, np.where(k_t > gm.pulses, 0.0, p_d))
     s = echo.shape.tau_s / echo.shape.a
     single_s = np.sqrt(2.0 * s * s + gm.jitter_s**2 + gm.bin_s**2 / 12.0)
     with np.errstate(divide="ignore"):
@@ -468,6 +529,6 @@ RECEIVER = register(
         response_reads=_response_reads,
         respond=respond,
         detection_reads=_detection_reads,
-        detect=detect,
+        detect=_detect_with_warnings,
     )
 )

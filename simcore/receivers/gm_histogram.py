@@ -16,6 +16,7 @@ import numpy as np
 from .gm_events import Events
 
 ESTIMATOR_BLOCK = 8192  # detected pixels per dense analysis block
+BLOCK_VALUES = 1 << 22  # bins of a dense analysis block at most (32 MB of float64 per array)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -169,8 +170,9 @@ def centroid_times(
     q = len(pixel)
     t_s = np.full(q, np.nan)
     signal = np.zeros(q)
-    for lo in range(0, q, ESTIMATOR_BLOCK):
-        sl = slice(lo, lo + ESTIMATOR_BLOCK)
+    block = max(1, min(ESTIMATOR_BLOCK, BLOCK_VALUES // max(int(length), 1)))
+    for lo in range(0, q, block):
+        sl = slice(lo, lo + block)
         p, s0 = pixel[sl], window_start_bin[sl]
         counts = dense_window(h, p, s0, length)
         bg = background_per_bin[sl][:, None]

@@ -358,6 +358,24 @@ class GeigerMode:
     coates: bool = _f(
         True, "-", doc="Geiger-mode range from the Coates-corrected histogram (false: raw counts)"
     )
+    attenuation_db: float = _f(
+        50.0,
+        "dB",
+        0.0,
+        200.0,
+        "Geiger-mode transmit attenuation: the frame's pulses carry laser.pulse_energy_j x "
+        "10^(-attenuation_db / 10) (50 dB: the paper's 5 mJ becomes 50 nJ, under one "
+        "photoelectron per pixel per pulse on the paper scene, where single-photon receivers "
+        "operate; 0: the full pulse, piled up)",
+    )
+    pileup_correction: str = _f(
+        "none",
+        "-",
+        doc="Geiger-mode first-photon (pile-up) correction: none (the centroid of the "
+        "histogram) or fit (the first-photon model fitted to each pixel's first avalanches "
+        "per armed pulse: echo start and photoelectrons per pulse)",
+        choices=("none", "fit"),
+    )
 
 
 # The span of the JPL DE421 ephemeris this simulator uses for the Sun (the `de421` package; its

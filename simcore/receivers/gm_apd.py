@@ -32,6 +32,7 @@ from ..scene import Scene, SceneError
 from . import Detection, Receiver, Response, register
 from . import gm_events as ev
 from . import gm_histogram as gh
+from . import gm_pileup as gp
 from .gm_limits import BYTES_PER_EVENT, MAX_EVENTS, armed_probability
 
 MAX_EVENTS_PER_PULSE = 10_000  # expected avalanches of one pixel in one gate at most
@@ -54,6 +55,12 @@ def background_power_w(scene: Scene, background=None) -> np.ndarray:
 def photon_energy_j(wavelength_m: float) -> float:
     """h nu = h c / lambda [J]."""
     return H * C / wavelength_m
+
+
+def frame_pulse_energy_j(scene: Scene) -> float:
+    """The energy of the Geiger-mode frame's pulses, laser.pulse_energy_j attenuated by
+    ``gm.attenuation_db``: E 10^(-A / 10) [J]."""
+    return scene.laser.pulse_energy_j * 10.0 ** (-scene.gm.attenuation_db / 10.0)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -143,7 +150,7 @@ def _check_load(scene: Scene, signal_pe, rate_hz, lit_pixel) -> None:
 def respond(scene: Scene, echo: EchoStage, background=None) -> GmResponse:
     """The frame: rates, photoelectrons and the avalanches of ``gm.pulses`` pulses."""
     gm = scene.gm
-    energy_j = scene.laser.pulse_energy_j
+    energy_j = frame_pulse_energy_j(scene)
     hv_j = photon_energy_j(scene.laser.wavelength_m)
     weights = np.asarray(echo.weights)
     element_pe = gm.pde * energy_j * weights / hv_j
@@ -186,6 +193,7 @@ def respond(scene: Scene, echo: EchoStage, background=None) -> GmResponse:
 def _response_reads(s: Scene) -> tuple:
     return (
         s.laser.pulse_energy_j,
+        s.gm.attenuation_db,
         s.laser.wavelength_m,
         s.detector.pixels,
         s.timing.range_gate_m,
@@ -315,6 +323,14 @@ def detect(scene: Scene, echo: EchoStage, rx: GmResponse) -> GmDetection:
     t_mean_s = rx.gate_start_s + est.t_s
     # range: the centroid less the mean photon delay of Eq. 1's pulse, 2 s (Gamma(2, s))
     r_est_m = 0.5 * C * (t_mean_s - 2.0 * s_scale)
+    if gm.pileup_correction == "fit":
+        first, armed = gp.first_events_histogram(
+            rx.events, p_pix, p_start - pre, length, gm.pulses, dead_bins
+        )
+        fit = gp.fit_first_photon(
+            _pileup_timing(scene, echo), first, armed, p_start - pre, bg_per_bin[p_pix]
+        )
+        r_est_m = 0.5 * C * (rx.gate_start_s + fit.t0_s)
     r_est_m = np.where(_inside_gate(scene, r_est_m), r_est_m, np.nan)
 
     lit_of = np.full(n_pixels, -1, dtype=np.int64)
@@ -347,7 +363,12 @@ def detect(scene: Scene, echo: EchoStage, rx: GmResponse) -> GmDetection:
     a_num = np.asarray(echo.arrivals_s) * np.asarray(echo.weights)
     w_sum = np.asarray(echo.weights).sum(axis=1)
     r_true_m = 0.5 * C * a_num.sum(axis=1) / np.where(w_sum > 0, w_sum, 1.0)
-    p_d, sigma_m = _predicted(scene, echo, rx, k_t[echo.pixel])
+    p_d, _ = _predicted(scene, echo, rx, k_t[echo.pixel])
+    pred_m, sigma_m = predicted_range_m(scene, echo, rx, pre, length)
+    figures = pileup_figures(scene, rx.signal_pe, pred_m - r_true_m, sigma_m, detected)
+    figures.update(measured_figures(range_m - r_true_m, detected))
+    false_pixel = np.minimum(1.0, n_windows * special.pdtrc(k_t - 1.0, mu_window))
+    false_points = expected_false_points(n_windows, mu_window, k_t, echo.pixel, p_d)
     fp_range, fp_echo = _first_photon(scene, rx, lo_bin, hi_bin, lit_of, s_scale)
     return GmDetection(
         p_detect=p_d,
@@ -356,9 +377,7 @@ def detect(scene: Scene, echo: EchoStage, rx: GmResponse) -> GmDetection:
         range_sigma_m=sigma_m,
         range_m=range_m,
         threshold_w=_threshold_power_w(scene, echo, float(np.median(k_t)), bg_per_bin, width),
-        n_false_per_pixel=float(
-            np.mean(np.minimum(1.0, n_windows * special.pdtrc(k_t - 1.0, mu_window)))
-        ),
+        n_false_per_pixel=float(np.mean(false_pixel)),
         outliers=outliers,
         threshold_counts=k_t,
         peak_counts=peak_counts,
@@ -368,7 +387,163 @@ def detect(scene: Scene, echo: EchoStage, rx: GmResponse) -> GmDetection:
             "counts": (peak_counts, counts_all[outliers.pixel]),
             "signal_pe": (rx.signal_pe, np.zeros(len(outliers.pixel))),
         },
+        summary_figures={"n_false_points_expected": false_points, **figures},
     )
+
+
+def expected_false_points(n_windows: float, mu_window, k_t, lit_pixel, p_d) -> float:
+    """Expected false points of the frame's cloud (docs/physics.md#false-points) [1].
+
+    The peak search slides its window of W bins over each pixel's histogram; the background
+    gives a false point where the densest window reaches k_T, with the probability that the
+    scan statistic of a Poisson process (window mean mu = N r W b, the gate n_windows = T / (W b)
+    windows long) reaches k_T: :func:`scan_probability`. This is about k_T times the threshold's
+    union bound over disjoint windows when mu is small. A pixel gives at most one point, and a
+    lit pixel a false one only when its echo is not detected (1 - P_d; an undefined P_d counts
+    as missed, a bound). The background is the primary rate without the dead time's losses:
+    where r d is not small the histogram holds less and the figure is an upper bound.
+
+    n_windows : T / (W b); mu_window : (pixels**2,) background counts of a window over the
+    frame; k_t : (pixels**2,) thresholds; lit_pixel : (n,) flat index of the lit pixels;
+    p_d : (n,) their predicted detection probability
+    """
+    p_false = scan_probability(mu_window, k_t, n_windows)
+    p_echo = np.where(np.isfinite(p_d), p_d, 0.0)
+    return float(p_false.sum() - np.sum(p_echo * p_false[np.asarray(lit_pixel)]))
+
+
+def scan_probability(mu_window, k_t, n_windows: float) -> np.ndarray:
+    """P(the count of a window of mean ``mu_window`` sliding over ``n_windows`` window lengths
+    of a Poisson process reaches ``k_t``), per element [1].
+
+    Naus's approximation, 1 - Q2 (Q3 / Q2)^(L/W - 2), with Q2 and Q3 the exact probabilities
+    that the scan stays below k over 2 and 3 window lengths (J. I. Naus, "Approximations for
+    distributions of scan statistics", J. Am. Stat. Assoc. 77, 177-183, 1982; the Poisson
+    forms as given by S. E. Alm, 1983). The sums run over the terms within 14 sqrt(mu) + 30 of k
+    (the rest are below 1e-40 of them).
+    """
+    mu = np.asarray(mu_window, dtype=np.float64)
+    k = np.asarray(k_t, dtype=np.float64)
+    ratio = max(float(n_windows), 2.0)
+    pairs, inverse = np.unique(np.stack([mu.ravel(), k.ravel()]), axis=1, return_inverse=True)
+    out = np.zeros(pairs.shape[1])
+    for sel in np.array_split(np.arange(pairs.shape[1]), max(1, pairs.shape[1] // 256)):
+        out[sel] = _naus(pairs[0, sel], pairs[1, sel].astype(np.int64), ratio)
+    return out[np.ravel(inverse)].reshape(mu.shape)
+
+
+def _naus(psi, k, ratio: float) -> np.ndarray:
+    """Naus's scan probability for window means psi (m,) and thresholds k (m,) int >= 1."""
+    psi = psi[:, None]
+
+    def pmf(j):
+        j = np.asarray(j, dtype=np.float64)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            v = np.exp(j * np.log(psi) - psi - special.gammaln(j + 1.0))
+        v = np.where(psi > 0, v, (j == 0).astype(np.float64))
+        return np.where(j >= 0, v, 0.0)
+
+    def cdf(j):
+        j = np.asarray(j, dtype=np.float64)
+        return np.where(j >= 0, special.pdtr(np.maximum(j, 0.0), psi), 0.0)
+
+    kk = k[:, None].astype(np.float64)
+    q2 = cdf(kk - 1) ** 2 - (kk - 1) * pmf(kk) * pmf(kk - 2) - (kk - 1 - psi) * pmf(kk) * cdf(kk - 3)
+    a1 = 2 * pmf(kk) * cdf(kk - 1) * ((kk - 1) * cdf(kk - 2) - psi * cdf(kk - 3))
+    a2 = 0.5 * pmf(kk) ** 2 * (
+        (kk - 1) * (kk - 2) * cdf(kk - 3) - 2 * (kk - 2) * psi * cdf(kk - 4) + psi**2 * cdf(kk - 5)
+    )
+    reach = int(np.ceil(14.0 * np.sqrt(float(psi.max())) + 30.0))
+    r = kk - 1 - np.arange(reach)[None, :]  # r = k - 1, k - 2, ... (>= 1 for a3, >= 2 for a4)
+    a3 = np.sum(np.where(r >= 1, pmf(2 * kk - r) * cdf(r - 1) ** 2, 0.0), axis=1, keepdims=True)
+    a4 = np.sum(
+        np.where(r >= 2, pmf(2 * kk - r) * pmf(r) * ((r - 1) * cdf(r - 2) - psi * cdf(r - 3)), 0.0),
+        axis=1,
+        keepdims=True,
+    )
+    q3 = cdf(kk - 1) ** 3 - a1 + a2 + a3 - a4
+    with np.errstate(divide="ignore", invalid="ignore"):
+        log_stay = np.log(q2) + (ratio - 2.0) * np.log1p((q3 - q2) / q2)
+    p = -np.expm1(np.where(q2 > 0, log_stay, -np.inf))
+    return np.clip(np.nan_to_num(p, nan=1.0), 0.0, 1.0)[:, 0]
+
+
+def _pileup_timing(scene: Scene, echo: EchoStage) -> gp.Timing:
+    gm = scene.gm
+    return gp.Timing(
+        scale_s=echo.shape.tau_s / echo.shape.a,
+        jitter_s=gm.jitter_s,
+        bin_s=gm.bin_s,
+        dead_time_s=gm.dead_time_s,
+        n_pulses=gm.pulses,
+    )
+
+
+def predicted_range_m(scene: Scene, echo: EchoStage, rx: GmResponse, pre: int, length: int):
+    """(n,) each lit pixel's range as its histogram gives it on average (pile-up, the
+    frame's finite pulses, jitter and bins included: :mod:`gm_pileup`) and its sd [m], for
+    the frame's estimator (the centroid, or the first-photon fit of ``gm.pileup_correction``)."""
+    gm = scene.gm
+    if len(echo.pixel) == 0:
+        return np.zeros(0), np.zeros(0)
+    t_lo = rx.gate_start_s
+    pe_per_weight = gm.pde * frame_pulse_energy_j(scene) / photon_energy_j(scene.laser.wavelength_m)
+    element_pe = pe_per_weight * np.asarray(echo.weights)
+    rate = rx.rate_hz[echo.pixel]
+    pred = gp.predict_pixels(
+        _pileup_timing(scene, echo),
+        np.asarray(echo.arrivals_s) - t_lo,
+        element_pe,
+        rate,
+        echo_armed_probability(scene, echo, rate),
+        window_bins(scene, echo),
+        pre,
+        length,
+        rx.histogram.n_bins,
+        gm.coates,
+        gm.pileup_correction,
+    )
+    return 0.5 * C * (t_lo + pred.t_s), 0.5 * C * pred.sd_s
+
+
+SATURATED_SHARE = 1.0 - np.exp(-1.0)  # a pixel is piled up when its echo fires it this often
+
+
+def pileup_figures(scene: Scene, signal_pe, bias_m, sigma_m, detected) -> dict:
+    """The summary's Geiger-mode figures: the predicted range bias and sd as the histogram
+    gives them (medians over the detected pixels) [m], the share of lit pixels whose echo
+    fires them in more than 1 - 1/e of the pulses (over one photoelectron per pulse: piled
+    up), and a warning when most are."""
+    sel = detected & np.isfinite(bias_m)
+    sat = float(np.mean(signal_pe > 1.0)) if len(signal_pe) else 0.0
+    bias = float(np.median(bias_m[sel])) if sel.any() else None
+    sigma = float(np.median(sigma_m[sel])) if sel.any() else None
+    figures: dict = {
+        "gm.range_bias_m": bias,
+        "gm.range_sigma_m": sigma,
+        "gm.saturated_pixel_fraction": sat,
+        "gm.signal_pe_median": float(np.median(signal_pe)) if len(signal_pe) else 0.0,
+        "gm.frame_pulse_energy_j": frame_pulse_energy_j(scene),
+        "warnings": [],
+    }
+    if sat > 0.5:
+        figures["warnings"].append(
+            f"Geiger mode: {100 * sat:.0f} % of the lit pixels are piled up (over one "
+            f"photoelectron per pulse, median {figures['gm.signal_pe_median']:.3g}): ranges "
+            f"biased by {1e3 * (bias or 0.0):+.0f} mm (predicted); raise gm.attenuation_db or "
+            "set gm.pileup_correction = fit"
+        )
+    return figures
+
+
+def measured_figures(error_m, detected) -> dict:
+    """The detected pixels' range error against the noise-free energy-weighted range: its
+    median and its sd about the mean [m] (what the predicted figures are checked against)."""
+    err = error_m[detected & np.isfinite(error_m)]
+    return {
+        "gm.range_error_median_m": float(np.median(err)) if len(err) else None,
+        "gm.range_error_sd_m": float(np.std(err)) if len(err) > 1 else None,
+    }
 
 
 def _inside_gate(scene: Scene, range_m) -> np.ndarray:
@@ -519,7 +694,7 @@ def first_photon_cloud(result):
 
 
 def _detection_reads(s: Scene) -> tuple:
-    return (s.timing.tnr, s.gm.coates)
+    return (s.timing.tnr, s.gm.coates, s.gm.pileup_correction)
 
 
 RECEIVER = register(

@@ -178,7 +178,9 @@ def low_signal(plate_scene, pe_target=1.0, **more):
 def test_the_signal_photoelectrons_are_pde_times_the_echo_energy_over_h_nu(plate_scene):
     scene = plate_scene(**GM)
     res = simcore.simulate(scene)
-    e_r = scene.laser.pulse_energy_j * res.echo.weights.sum(axis=1)
+    # the frame's pulses carry laser.pulse_energy_j less gm.attenuation_db (50 dB by default)
+    assert scene.gm.attenuation_db == 50.0
+    e_r = scene.laser.pulse_energy_j * 1e-5 * res.echo.weights.sum(axis=1)
     hv = H * C / scene.laser.wavelength_m
     np.testing.assert_allclose(res.receiver.signal_pe, scene.gm.pde * e_r / hv, rtol=1e-12)
     assert res.summary()["receiver_kind"] == "gm_apd"
@@ -259,7 +261,9 @@ def test_bad_geiger_mode_input_names_the_key(key, value, message):
 
 
 def test_a_frame_beyond_the_event_budget_is_refused_naming_the_key(plate_scene):
-    scene = plate_scene(**GM, **{"gm.dead_time_s": 0.0, "gm.pulses": 10_000})
+    # the full pulse (no attenuation): thousands of photoelectrons a pixel, each recorded
+    more = {"gm.dead_time_s": 0.0, "gm.pulses": 10_000, "gm.attenuation_db": 0.0}
+    scene = plate_scene(**GM, **more)
     with pytest.raises(simcore.SceneError, match="gm.dead_time_s = 0 s lets a pixel record"):
         simcore.simulate(scene)
 

@@ -1,0 +1,577 @@
+"""Geiger-mode pile-up: what the histogram's range estimators give at any flux, and the
+first-photon (pile-up) correction (docs/physics.md#gm-pileup).
+
+The expected histogram. Each lit pixel's echo elements (Eqs. 1, 29, 30) and constant rate give
+its cumulative primary intensity Lambda(t) = sum_k N_k G((t - t_k) / s) + r t exactly
+(G(x) = 1 - (1 + x) e^-x); the pixel fires in a fine cell of time (a quarter of the jitter or the
+bin at most) with probability armed x (1 - e^-dLambda), armed = the share of pulses not within
+the dead time of an earlier avalanche (closed form, a0 (e^-Lambda_i - e^-Lambda_i+1), when the dead
+time outlasts the window: the first photon). Jitter then moves each avalanche (a convolution of
+the fine cells with the Gaussian), and the TDC sums the cells into bins: q_j, the expected
+avalanches per pulse in bin j, and alpha_j = 1 - (expected avalanches within the dead time before
+bin j), the share of pulses armed at bin j (the expectation of Coates' A_j / N).
+
+The Coates centroid at finite N. Coates' estimate of bin j is v_j = -ln(1 - n_j / A_j) less the
+background's r b, with A_j ~ Binomial(N, alpha_j) pulses armed and n_j | A_j ~ Binomial(A_j, h_j),
+h_j = q_j / alpha_j (exact for the first photon: the pulses are independent); the estimator
+clips n_j = A_j to A_j - 1/2 and gives 0 where A_j = 0. Its mean and variance per bin are summed
+exactly over n and A where A is small (a table over A <= A_TABLE and h), by the misses' Poisson
+law or the delta method where A is large. The centroid's expectation is the ratio of the expected
+sums, its variance the delta method's, sum_j ((t_j - t_c) / V)^2 Var v_j (the Coates increments
+are uncorrelated, as the Nelson-Aalen estimator's are). With few pulses the late bins have no
+armed pulse left and the centroid moves towards the echo's onset: the pile-up bias.
+
+The correction (``gm.pileup_correction = "fit"``): the maximum-likelihood fit of each detected
+pixel's first avalanches after the window opens (at most one per pulse: the first-photon
+histogram, which the pulse-tagged avalanches give for any dead time) by the single-surface
+model, two parameters, the echo's start t0 and its photoelectrons per pulse N_s (the jitter
+after the dead time's arbitration, the background from its known rate): dead-time aware by
+construction, as photon-counting processors' first-photon corrections are.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+from scipy import special
+
+A_TABLE = 128  # armed pulses up to which the Coates estimate's moments are tabulated exactly
+U_MAX = 14.0  # the table's h runs to 1 - e^-14 (beyond: the same, every armed pulse fires)
+U_STEP = 0.05
+SMALL_MEAN_A = 30.0  # below this mean of A the moments are summed over A exactly
+POISSON_MU_MAX = 60.0  # misses' Poisson table up to this mean (beyond: the delta method)
+CELLS_PER_SIGMA = 4.0  # fine cells per jitter sd (and per bin at least 2, at most 16)
+ROW_BLOCK = 2048  # pixels per block of the fine model
+
+
+# ----------------------------------------------------------------------------------------------
+# the moments of Coates' estimate of one bin
+# ----------------------------------------------------------------------------------------------
+def _u_grid() -> np.ndarray:
+    return np.arange(0.0, U_MAX + U_STEP / 2, U_STEP)
+
+
+@lru_cache(maxsize=1)
+def _coates_table() -> tuple[np.ndarray, np.ndarray]:
+    """(A_TABLE + 1, U) mean and variance of f = -ln(1 - min(n, A - 1/2) / A),
+    n ~ Binomial(A, h), h = 1 - e^-u on the u grid; row A = 0 is 0 (no armed pulse). The
+    variance, not the second moment, is tabulated: both are then nearly linear in h where h is
+    small, so the interpolation in u keeps them."""
+    u = _u_grid()
+    h = -np.expm1(-u)
+    m1 = np.zeros((A_TABLE + 1, len(u)))
+    var = np.zeros_like(m1)
+    for a in range(1, A_TABLE + 1):
+        n = np.arange(a + 1)[:, None]
+        f = -np.log1p(-np.minimum(n, a - 0.5) / a)
+        with np.errstate(divide="ignore"):
+            logp = (
+                special.gammaln(a + 1)
+                - special.gammaln(n + 1)
+                - special.gammaln(a - n + 1)
+                + special.xlogy(n, h[None, :])
+                + special.xlog1py(a - n, -h[None, :])
+            )
+        p = np.exp(logp)
+        m1[a] = (p * f).sum(axis=0)
+        var[a] = np.maximum((p * (f - m1[a][None, :]) ** 2).sum(axis=0), 0.0)
+    m1.setflags(write=False)
+    var.setflags(write=False)
+    return m1, var
+
+
+@lru_cache(maxsize=1)
+def _poisson_log_table() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """E[ln M'] and E[ln^2 M'] of M' = max(M, 1/2), M ~ Poisson(mu), on a mu grid."""
+    mu = np.linspace(0.0, POISSON_MU_MAX, 1201)
+    m = np.arange(0, int(POISSON_MU_MAX * 3) + 40)[:, None]
+    lm = np.log(np.maximum(m, 0.5))
+    p = np.exp(special.xlogy(m, mu[None, :]) - mu[None, :] - special.gammaln(m + 1))
+    return mu, (p * lm).sum(axis=0), (p * lm * lm).sum(axis=0)
+
+
+def _table_moments(a_int: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The tabulated first and second moments at integer A <= A_TABLE (mean and variance
+    interpolated in u = -ln(1 - h))."""
+    m1, var = _coates_table()
+    u = np.minimum(-np.log1p(-np.minimum(h, 1.0 - 1e-300)), U_MAX) / U_STEP
+    i = np.minimum(u.astype(np.intp), m1.shape[1] - 2)
+    w = u - i
+    mean = m1[a_int, i] * (1 - w) + m1[a_int, i + 1] * w
+    v = var[a_int, i] * (1 - w) + var[a_int, i + 1] * w
+    return mean, v + mean * mean
+
+
+def _large_a_moments(a: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The moments for large A: f = ln A - ln M', M = A - n ~ Binomial(A, 1 - h) the misses,
+    by their Poisson law where few are expected, the delta method otherwise."""
+    p = 1.0 - h
+    mu = a * p
+    mu_t, l1_t, l2_t = _poisson_log_table()
+    few = mu < POISSON_MU_MAX
+    l1 = np.empty_like(mu)
+    l2 = np.empty_like(mu)
+    l1[few] = np.interp(mu[few], mu_t, l1_t)
+    l2[few] = np.interp(mu[few], mu_t, l2_t)
+    many = ~few
+    if many.any():
+        m, v = mu[many], (a * p * h)[many]
+        lnm = np.log(m)
+        l1[many] = lnm - v / (2 * m * m)
+        l2[many] = lnm * lnm + (v / (m * m)) * (1.0 - lnm)
+    la = np.log(a)
+    return la - l1, la * la - 2 * la * l1 + l2
+
+
+def _moments_at(a: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Moments of Coates' estimate at A armed pulses (real A >= 0: the table linear in A up to
+    A_TABLE, the large-A law beyond)."""
+    a = np.asarray(a, dtype=np.float64)
+    m1 = np.zeros_like(a)
+    m2 = np.zeros_like(a)
+    small = a <= A_TABLE
+    if small.any():
+        lo = np.minimum(np.floor(a[small]).astype(np.intp), A_TABLE - 1)
+        w = a[small] - lo
+        m1a, m2a = _table_moments(lo, h[small])
+        m1b, m2b = _table_moments(lo + 1, h[small])
+        m1[small] = m1a * (1 - w) + m1b * w
+        m2[small] = m2a * (1 - w) + m2b * w
+    big = ~small
+    if big.any():
+        m1[big], m2[big] = _large_a_moments(a[big], h[big])
+    return m1, m2
+
+
+# mean of A below each bound -> the largest A summed (Poisson tails beyond it below 1e-7)
+_A_SUM_CLASSES = ((0.05, 4), (1.0, 9), (4.0, 17), (10.0, 30), (SMALL_MEAN_A, 60))
+_GH_X, _GH_W = np.polynomial.hermite_e.hermegauss(7)
+_GH_W = _GH_W / _GH_W.sum()
+
+
+def coates_bin_moments(
+    n_pulses: int, alpha: np.ndarray, h: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """E[f] and E[f^2] of Coates' estimate f of a bin with A ~ Binomial(n_pulses, alpha) armed
+    pulses, each firing in it with probability h (any shape; elementwise)."""
+    alpha = np.clip(np.asarray(alpha, dtype=np.float64), 0.0, 1.0)
+    h = np.clip(np.asarray(h, dtype=np.float64), 0.0, 1.0)
+    mean_a = n_pulses * alpha
+    e1 = np.zeros_like(mean_a)
+    e2 = np.zeros_like(mean_a)
+    live = (mean_a > 1e-12) & (h > 0)
+    lo_mean = 0.0
+    for hi_mean, k_max in _A_SUM_CLASSES:
+        sel = np.flatnonzero(live & (mean_a >= lo_mean) & (mean_a < hi_mean))
+        lo_mean = hi_mean
+        if not len(sel):
+            continue
+        k = np.arange(min(k_max, n_pulses) + 1)
+        al, hs = alpha[sel][:, None], h[sel][:, None]
+        with np.errstate(divide="ignore"):
+            logp = (
+                special.gammaln(n_pulses + 1)
+                - special.gammaln(k + 1)
+                - special.gammaln(n_pulses - k + 1)
+                + special.xlogy(k, al)
+                + special.xlog1py(n_pulses - k, -al)
+            )
+        p = np.exp(logp)
+        m1, m2 = _moments_at(
+            np.broadcast_to(k, p.shape).astype(float), np.broadcast_to(hs, p.shape)
+        )
+        e1[sel] = (p * m1).sum(axis=1)
+        e2[sel] = (p * m2).sum(axis=1)
+    large = (mean_a >= SMALL_MEAN_A) & (h > 0)
+    if large.any():
+        mu = mean_a[large][:, None]
+        sd = np.sqrt(mu * (1.0 - alpha[large][:, None]))
+        a_nodes = np.clip(mu + sd * _GH_X[None, :], 1.0, n_pulses)
+        m1, m2 = _moments_at(a_nodes, np.broadcast_to(h[large][:, None], a_nodes.shape))
+        e1[large] = m1 @ _GH_W
+        e2[large] = m2 @ _GH_W
+    return e1, e2
+
+
+# ----------------------------------------------------------------------------------------------
+# the expected histogram of a lit pixel
+# ----------------------------------------------------------------------------------------------
+@dataclass(frozen=True, kw_only=True)
+class Timing:
+    """What shapes a pixel's histogram: Eq. 1's Gamma(2, s) scale, jitter sd, TDC bin, dead
+    time, the pulses of a frame [s, s, s, s, 1]."""
+
+    scale_s: float
+    jitter_s: float
+    bin_s: float
+    dead_time_s: float
+    n_pulses: int
+
+
+def fine_cells_per_bin(t: Timing) -> int:
+    """Fine cells per TDC bin: CELLS_PER_SIGMA per jitter sd and 8 per s, 2 to 16."""
+    finest = min(t.jitter_s / CELLS_PER_SIGMA, t.scale_s / 8.0)
+    return int(np.clip(np.ceil(t.bin_s / max(finest, 1e-300)), 2, 16))
+
+
+def expected_histogram(
+    t: Timing,
+    element_t_s: np.ndarray,
+    element_pe: np.ndarray,
+    rate_hz: np.ndarray,
+    start_bin: np.ndarray,
+    n_bins: int,
+    armed_at_start: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(n, n_bins) expected avalanches per pulse in each bin q_j and the expected share of
+    pulses armed at each bin alpha_j, over bins start_bin .. start_bin + n_bins - 1.
+
+    element_t_s : (n, K) start of each echo element's pulse from the gate's opening [s]
+    element_pe : (n, K) its mean photoelectrons per pulse [1] (0 = none)
+    rate_hz : (n,) constant primary rate (background, dark) [1/s]
+    start_bin : (n,) int, first bin of each pixel's window (from the gate's opening)
+    armed_at_start : (n,) share of pulses armed when the window opens [1]
+    """
+    n = len(start_bin)
+    k_fine = fine_cells_per_bin(t)
+    dt = t.bin_s / k_fine
+    reach = int(np.ceil(4.0 * t.jitter_s / dt))
+    # the fine cells run `reach` before the window to `reach` after it (jitter moves them in)
+    n_cells = n_bins * k_fine + 2 * reach
+    q = np.zeros((n, n_bins))
+    alpha = np.zeros((n, n_bins))
+    x = (np.arange(-reach, n_bins * k_fine + reach + 1) * dt)[None, :]  # cell edges
+    kern_x = np.arange(-2 * reach, 2 * reach + 1) * dt
+    if t.jitter_s > 0:
+        edges = np.r_[kern_x - dt / 2, kern_x[-1] + dt / 2] / t.jitter_s
+        kern = np.diff(special.ndtr(edges))
+    else:
+        kern = (kern_x == 0).astype(float)
+    dead_cells = t.dead_time_s / dt
+    dead_bins = int(round(t.dead_time_s / t.bin_s))
+    for lo in range(0, n, ROW_BLOCK):
+        sl = slice(lo, lo + ROW_BLOCK)
+        t0 = start_bin[sl, None] * t.bin_s  # window start, from the gate's opening
+        te = t0 + x  # (m, n_cells + 1)
+        lam = rate_hz[sl, None] * (te - te[:, :1])
+        et, ep = element_t_s[sl], element_pe[sl]
+        for k in range(et.shape[1]):
+            on = ep[:, k] > 0
+            if not on.any():
+                continue
+            xk = np.maximum((te - et[:, k, None]) / t.scale_s, 0.0)
+            lam += np.where(on[:, None], ep[:, k, None] * -np.expm1(np.log1p(xk) - xk), 0.0)
+        a0 = armed_at_start[sl, None]
+        if dead_cells >= n_cells:  # the first photon of the window
+            e = a0 * -np.diff(np.exp(-lam), axis=1)
+        else:
+            p = -np.expm1(-np.diff(lam, axis=1))
+            e = np.zeros_like(p)
+            recent = np.zeros(len(p))
+            m = max(int(round(dead_cells)), 0)
+            for i in range(n_cells):
+                e[:, i] = np.maximum(a0[:, 0] - recent, 0.0) * p[:, i]
+                recent += e[:, i]
+                if m == 0:
+                    recent -= e[:, i]
+                elif i - m + 1 >= 0:
+                    recent -= e[:, i - m + 1]
+        # jitter: convolve the cells with the Gaussian, keep the window's cells, sum into bins
+        from scipy.ndimage import convolve1d  # noqa: PLC0415
+
+        ej = convolve1d(e, kern, axis=1, mode="constant")
+        qb = ej[:, reach : reach + n_bins * k_fine].reshape(len(e), n_bins, k_fine).sum(axis=2)
+        q[sl] = qb
+        # armed share at bin j: a0 less the avalanches within the dead time before j
+        cq = np.concatenate([np.zeros((len(qb), 1)), np.cumsum(qb, axis=1)], axis=1)
+        j = np.arange(n_bins)
+        lo_j = np.maximum(j - dead_bins, 0) if dead_bins < n_bins else np.zeros_like(j)
+        alpha[sl] = a0 - (cq[:, j] - cq[:, lo_j])
+    return q, np.clip(alpha, 0.0, 1.0)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Prediction:
+    """The Coates centroid of each lit pixel as its histogram gives it.
+
+    t_s : (n,) expected centroid from the gate's opening [s] (NaN where no signal)
+    sd_s : (n,) its standard deviation [s]
+    signal_counts : (n,) expected signal avalanches of the frame in the window [1]
+    """
+
+    t_s: np.ndarray
+    sd_s: np.ndarray
+    signal_counts: np.ndarray
+
+
+def coates_centroid(
+    t: Timing,
+    q: np.ndarray,
+    alpha: np.ndarray,
+    start_bin: np.ndarray,
+    background_per_bin: np.ndarray,
+    coates: bool = True,
+) -> Prediction:
+    """Expected centroid and its sd of Coates' estimates (``coates``) or of the raw counts
+    less the background over each pixel's window (module docstring)."""
+    n_b = q.shape[1]
+    bg = background_per_bin[:, None]
+    if coates:
+        h = np.where(alpha > 0, q / np.maximum(alpha, 1e-300), 0.0)
+        e1, e2 = coates_bin_moments(t.n_pulses, alpha.ravel(), h.ravel())
+        e1, e2 = e1.reshape(q.shape), e2.reshape(q.shape)
+        mean_v = e1 - bg
+        var_v = np.maximum(e2 - e1 * e1, 0.0)
+    else:
+        mean_v = q - bg
+        var_v = q * (1.0 - q) / t.n_pulses  # per pulse: the estimator's scale cancels
+    t_bin = (start_bin[:, None] + np.arange(n_b)[None, :] + 0.5) * t.bin_s
+    total = mean_v.sum(axis=1)
+    ok = total > 0
+    safe = np.where(ok, total, 1.0)
+    t_c = (mean_v * t_bin).sum(axis=1) / safe
+    var_t = (((t_bin - t_c[:, None]) / safe[:, None]) ** 2 * var_v).sum(axis=1)
+    signal = t.n_pulses * np.maximum(q - bg, 0.0).sum(axis=1)
+    # the ratio's own spread with a Poisson number of counts: E[1/S] ~ (1 + 1/S) / S
+    var_t = var_t * (1.0 + 1.0 / np.maximum(signal, 1.0))
+    return Prediction(
+        t_s=np.where(ok, t_c, np.nan),
+        sd_s=np.where(ok, np.sqrt(var_t), np.nan),
+        signal_counts=signal,
+    )
+
+
+def expected_windows(
+    t: Timing,
+    element_t_s: np.ndarray,
+    element_pe: np.ndarray,
+    rate_hz: np.ndarray,
+    armed_at_start: np.ndarray,
+    width: int,
+    pre: int,
+    length: int,
+    n_gate_bins: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each lit pixel's analysis window as its detection forms it from the expected histogram
+    (its densest window of ``width`` bins, from ``pre`` bins before it, ``length`` long:
+    gm_apd.detect's): (n,) its first bin, (n, length) q_j and alpha_j over it (bins outside
+    the gate hold nothing).
+
+    element_t_s, element_pe : (n, K) the echo elements from the gate's opening [s], [1]
+    rate_hz : (n,) constant rate [1/s]; armed_at_start : (n,) pulses armed before the echo [1]
+    """
+    n = len(rate_hz)
+    has = element_pe > 0
+    first_s = np.where(has, element_t_s, np.inf).min(axis=1)
+    last_s = np.where(has, element_t_s, -np.inf).max(axis=1)
+    first_s = np.where(np.isfinite(first_s), first_s, 0.0)
+    last_s = np.where(np.isfinite(last_s), last_s, first_s)
+    reach = int(np.ceil(4.0 * t.jitter_s / t.bin_s)) + 1
+    margin = pre + width + reach + 2
+    span_start = np.floor(first_s / t.bin_s).astype(np.int64) - margin
+    echo_bins = int(np.ceil(float(np.max(last_s - first_s, initial=0.0)) / t.bin_s))
+    span = echo_bins + 2 * margin + length + width
+    q, alpha = expected_histogram(
+        t, element_t_s, element_pe, rate_hz, span_start, span, armed_at_start
+    )
+    cum = np.concatenate([np.zeros((n, 1)), np.cumsum(q, axis=1)], axis=1)
+    moving = cum[:, width:] - cum[:, :-width]
+    peak = np.argmax(moving, axis=1)
+    ws = np.clip(peak - pre, 0, span - length)
+    rows = np.arange(n)[:, None]
+    cols = ws[:, None] + np.arange(length)[None, :]
+    start_bin = span_start + ws
+    absolute = start_bin[:, None] + np.arange(length)[None, :]
+    inside = (absolute >= 0) & (absolute < n_gate_bins)
+    return start_bin, np.where(inside, q[rows, cols], 0.0), alpha[rows, cols]
+
+
+def predict_pixels(
+    t: Timing,
+    element_t_s: np.ndarray,
+    element_pe: np.ndarray,
+    rate_hz: np.ndarray,
+    armed_at_start: np.ndarray,
+    width: int,
+    pre: int,
+    length: int,
+    n_gate_bins: int,
+    coates: bool = True,
+    correction: str = "none",
+) -> Prediction:
+    """The range estimate of each lit pixel as its histogram gives it, from the gate's opening
+    [s]: the echo's start (the centroid less 2 s, Eq. 1's mean delay; or the first-photon
+    fit's t0, ``correction = "fit"``), and its sd (module docstring; arguments as
+    :func:`expected_windows`)."""
+    start_bin, q, alpha = expected_windows(
+        t, element_t_s, element_pe, rate_hz, armed_at_start, width, pre, length, n_gate_bins
+    )
+    bg = rate_hz * t.bin_s
+    centroid = coates_centroid(t, q, alpha, start_bin, bg, coates)
+    if correction != "fit":
+        return Prediction(
+            t_s=centroid.t_s - 2.0 * t.scale_s,
+            sd_s=centroid.sd_s,
+            signal_counts=centroid.signal_counts,
+        )
+    first = Timing(
+        scale_s=t.scale_s,
+        jitter_s=t.jitter_s,
+        bin_s=t.bin_s,
+        dead_time_s=np.inf,
+        n_pulses=t.n_pulses,
+    )
+    a0 = alpha[:, 0]
+    q1, _ = expected_histogram(
+        first, element_t_s, element_pe, np.zeros_like(rate_hz), start_bin, length, a0
+    )
+    t0, sd = predict_fit(first, q1 / np.maximum(a0, 1e-300)[:, None], a0, start_bin)
+    return Prediction(t_s=t0, sd_s=sd, signal_counts=centroid.signal_counts)
+
+
+# ----------------------------------------------------------------------------------------------
+# the first-photon correction
+# ----------------------------------------------------------------------------------------------
+@lru_cache(maxsize=1)
+def first_photon_table() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """ln N grid, and the mean and variance (in units of s) of the first primary event's delay
+    after the echo's start for a single surface of N photoelectrons per pulse, given one in
+    the pulse: density N x e^-x e^(-N G(x)) / (1 - e^-N), G(x) = 1 - (1 + x) e^-x."""
+    log_n = np.linspace(np.log(1e-4), np.log(1e7), 442)
+    x = np.concatenate([np.geomspace(1e-7, 1e-2, 800), np.linspace(1e-2, 40.0, 8000)[1:]])
+    big_g = -np.expm1(np.log1p(x) - x)
+    n = np.exp(log_n)[:, None]
+    surv = np.exp(-n * big_g[None, :])
+    cdf = (1.0 - surv) / -np.expm1(-n)
+    # moments by parts from the CDF (trapezoid over the non-uniform grid)
+    dx = np.diff(x)
+    tail = 1.0 - cdf
+    mid = 0.5 * (tail[:, 1:] + tail[:, :-1])
+    mean = x[0] + (mid * dx).sum(axis=1)
+    xm = 0.5 * (x[1:] + x[:-1])
+    second = x[0] ** 2 + (2.0 * xm * mid * dx).sum(axis=1)
+    return log_n, mean, np.maximum(second - mean * mean, 0.0)
+
+
+def first_photon_delay(signal_pe) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and variance of the first photon's delay [units of s] for ``signal_pe``."""
+    log_n, mean, var = first_photon_table()
+    ln = np.log(np.clip(np.asarray(signal_pe, dtype=np.float64), 1e-4, 1e7))
+    return np.interp(ln, log_n, mean), np.interp(ln, log_n, var)
+
+
+def signal_from_spread(var_delay) -> np.ndarray:
+    """The photoelectrons per pulse whose first-photon delay has variance ``var_delay`` [s^2
+    units of s]: the table inverted (the variance falls with N)."""
+    log_n, _, var = first_photon_table()
+    v = np.asarray(var_delay, dtype=np.float64)
+    return np.exp(np.interp(-v, -var, log_n))
+
+
+@dataclass(frozen=True, kw_only=True)
+class FirstPhotonFit:
+    """The first-photon model fitted to each pixel's first avalanches of its armed pulses.
+
+    t0_s : (q,) the echo's start from the gate's opening [s] (NaN where no signal)
+    signal_pe : (q,) its photoelectrons per pulse [1]
+    saturated : (q,) bool, (nearly) every armed pulse fired: N_s from the spread
+    n_first : (q,) signal first avalanches (background subtracted) [1]
+    """
+
+    t0_s: np.ndarray
+    signal_pe: np.ndarray
+    saturated: np.ndarray
+    n_first: np.ndarray
+
+
+def first_events_histogram(events, pixel, start_bin, length, n_pulses, dead_bins):
+    """(q, length) first avalanche of each pulse in each pixel's window [start, start + length)
+    and (q,) the pulses armed when it opens (no avalanche within the dead time before it)."""
+    q = len(pixel)
+    n_all = int(max(int(events.pixel.max()) + 1 if len(events) else 0, int(pixel.max()) + 1))
+    row_of = np.full(n_all, -1, dtype=np.int64)
+    row_of[pixel] = np.arange(q)
+    row = row_of[events.pixel]
+    sel = row >= 0
+    row, b, pulse = row[sel], events.bin[sel].astype(np.int64), events.pulse[sel].astype(np.int64)
+    rel = b - start_bin[row]
+    # pulses dead when the window opens
+    dead = (rel < 0) & (rel >= -dead_bins)
+    dead_key = np.unique(row[dead] * n_pulses + pulse[dead])
+    armed = n_pulses - np.bincount(dead_key // n_pulses, minlength=q)
+    inside = (rel >= 0) & (rel < length)
+    key = row[inside] * n_pulses + pulse[inside]
+    keep = ~np.isin(key, dead_key)
+    key, rel_in = key[keep], rel[inside][keep]
+    # events are sorted by pixel, then bin: a pulse's first occurrence is its earliest
+    _, first = np.unique(key, return_index=True)
+    hist = np.zeros((q, length))
+    np.add.at(hist, (key[first] // n_pulses, rel_in[first]), 1.0)
+    return hist, armed.astype(np.float64)
+
+
+def fit_first_photon(
+    t: Timing,
+    hist: np.ndarray,
+    armed: np.ndarray,
+    start_bin: np.ndarray,
+    background_per_bin: np.ndarray,
+) -> FirstPhotonFit:
+    """Fit each pixel's first-avalanche histogram (q, L) of ``armed`` pulses (module
+    docstring; docs/physics.md#gm-pileup):
+
+    - the background: a pulse still armed at bin j fires on it with r b, so the signal's first
+      avalanches are n_j - A_j r b (A_j the armed pulses left);
+    - N_s from the share of armed pulses that fired, f = S / A_0: N_s = -ln(1 - f); where
+      nearly all fired (A_0 - S < 3, no information left in the share) from the spread of
+      the first avalanches instead, Var t = s^2 Var x(N_s) + sigma_j^2 + b^2 / 12;
+    - t0 from their mean, t0 = mean t - s E x(N_s): the first photon's mean delay of the
+      model (jitter and the bin are centred).
+    """
+    n_b = hist.shape[1]
+    t_bin = (start_bin[:, None] + np.arange(n_b)[None, :] + 0.5) * t.bin_s
+    a0 = np.maximum(armed, 1.0)
+    left = a0[:, None] - np.concatenate(
+        [np.zeros((len(hist), 1)), np.cumsum(hist, axis=1)[:, :-1]], axis=1
+    )
+    sig = np.maximum(hist - np.maximum(left, 0.0) * background_per_bin[:, None], 0.0)
+    n_sig = sig.sum(axis=1)
+    ok = n_sig > 0
+    safe = np.where(ok, n_sig, 1.0)
+    mean_t = (sig * t_bin).sum(axis=1) / safe
+    var_t = (sig * (t_bin - mean_t[:, None]) ** 2).sum(axis=1) / np.maximum(safe - 1.0, 1.0)
+    frac = np.minimum(n_sig / a0, 1.0 - 0.5 / a0)
+    n_share = -np.log1p(-frac)
+    saturated = a0 - n_sig < 3.0
+    s2 = t.scale_s**2
+    var_x = (var_t - t.jitter_s**2 - t.bin_s**2 / 12.0) / s2
+    n_spread = signal_from_spread(np.maximum(var_x, 0.0))
+    n_s = np.where(saturated, np.maximum(n_spread, n_share), n_share)
+    mean_x, _ = first_photon_delay(n_s)
+    t0 = mean_t - t.scale_s * mean_x
+    return FirstPhotonFit(
+        t0_s=np.where(ok, t0, np.nan),
+        signal_pe=np.where(ok, n_s, np.nan),
+        saturated=saturated & ok,
+        n_first=n_sig,
+    )
+
+
+def predict_fit(t: Timing, q: np.ndarray, alpha0: np.ndarray, start_bin: np.ndarray):
+    """Expected t0 and its sd of :func:`fit_first_photon` from the expected first-avalanche
+    histogram (q : (n, L) per pulse, the first photon of each pulse: alpha0 (n,) armed when the
+    window opens): the fit of the expected histogram, and the delta method's sd of the mean of
+    the first avalanches, sqrt(Var t / S), S = N a0 sum q (the spread-based N_s adds little
+    where it is used: the delay's mean varies slowly with N_s there)."""
+    armed = t.n_pulses * alpha0
+    hist = armed[:, None] * q
+    fit = fit_first_photon(t, hist, armed, start_bin, np.zeros(len(q)))
+    n_b = q.shape[1]
+    t_bin = (start_bin[:, None] + np.arange(n_b)[None, :] + 0.5) * t.bin_s
+    total = np.maximum(hist.sum(axis=1), 1e-300)
+    mean_t = (hist * t_bin).sum(axis=1) / total
+    var_t = (hist * (t_bin - mean_t[:, None]) ** 2).sum(axis=1) / total
+    sd = np.sqrt(var_t / np.maximum(total, 1.0) * (1.0 + 1.0 / np.maximum(total, 1.0)))
+    return fit.t0_s, sd

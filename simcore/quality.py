@@ -6,9 +6,10 @@ tolerance tau (``quality.tau_m``)
 - precision: the share of the cloud's target points within tau of the true mesh (exact
   point-to-mesh distance, point-cloud-utils' BVH);
 - recall (completeness): the share of the *visible* true surface within tau of a point; the
-  surface is sampled uniformly by area over the facets the lidar sees, and a sample counts only
-  if it lies inside the array's field of view and nothing hides it from the lidar (a ray cast to
-  it, Embree);
+  whole mesh is sampled uniformly by area, and a sample counts only if it lies inside the
+  array's field of view and nothing hides it from the lidar (a ray cast to it, Embree): the
+  samples that count are spread by area over the surface the lidar sees, grazing parts included
+  (the facets hit by the pixels' rays would miss most of a sphere's rim);
 - F-score: their harmonic mean;
 
 and along the lines of sight, from each point's ground truth (``simcore.pointcloud.ground_truth``):
@@ -37,7 +38,7 @@ if TYPE_CHECKING:
     from .scene import Scene
     from .target import TargetModel
 
-SURFACE_SAMPLES = 50_000  # samples of the seen facets for recall (its standard error <= 0.0023)
+SURFACE_SAMPLES = 50_000  # area samples of the mesh for recall (those seen count)
 SEEN_SLACK_M = 1e-3  # a sample whose ray hits within this of it is seen (float32 ray distances)
 
 
@@ -197,7 +198,8 @@ def quality_metrics(
     points_t = to_target_frame(cloud.points[target], hits.pose)
     near = near_mesh(points_t, model, tau_m, hits.visible_faces)
     rng = np.random.default_rng([seed, 7411])
-    surface = seen_surface(caster, hits.pose, fov_rad, hits.visible_faces, n_samples, rng)
+    every_face = np.arange(len(model.faces))
+    surface = seen_surface(caster, hits.pose, fov_rad, every_face, n_samples, rng)
     recalled = np.zeros(len(surface.face), dtype=bool)
     if len(points_t) and surface.seen.any():
         d_m, _ = cKDTree(points_t).query(surface.points_t[surface.seen], k=1)
@@ -213,7 +215,7 @@ def quality_metrics(
         "recall": recall,
         "f_score": float(f_score),
         **_errors(error_m),
-        "outlier_fraction": _ratio(np.count_nonzero(attrs["outlier"]), len(cloud)),
+        "outlier_fraction": _ratio(float(np.count_nonzero(attrs["outlier"])), len(cloud)),
         "point_density_per_m2": _ratio(len(points_t), seen_m2),
         "seen_area_m2": seen_m2,
         "n_surface_samples": int(surface.seen.sum()),

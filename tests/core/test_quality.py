@@ -1,0 +1,252 @@
+"""Ground truth for every point and the imaging-quality metrics (simcore.pointcloud.ground_truth,
+simcore.quality), against closed forms first: a plate at normal incidence under a flat-top beam,
+the visible cap of a sphere, and a mesh with degenerate faces."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+import simcore
+from simcore import quality
+from simcore.pointcloud import pixel_surfaces
+from simcore.scene import Scene, SceneError, with_overrides
+
+DISTANCE_M = 100.0
+PLATE_M = 2.0  # side of the calibration plate
+LIT_RADIUS_M = 0.6  # the flat-top beam's disc on the plate: tan(theta / 2) * distance
+THETA_ILL_RAD = 2.0 * math.atan(LIT_RADIUS_M / DISTANCE_M)
+FOV_RAD = 0.03
+PIXELS = 128
+
+PLATE = {
+    "target.mesh": "plate",
+    "target.size_m": PLATE_M,
+    "pose.distance_m": DISTANCE_M,
+    "detector.pixels": PIXELS,
+    "receive.fov_rad": FOV_RAD,
+    "transmit.illumination": "flat_top",
+    "laser.divergence_rad": THETA_ILL_RAD,
+    "transmit.beam_expansion_ratio": 1.0,
+    "seed": 3,
+}
+
+
+@pytest.fixture(scope="module")
+def plate():
+    """The plate frame, and the same frame's figures at tau = 5 range sigmas."""
+    result = simcore.simulate(with_overrides(Scene(), PLATE))
+    d = result.detection
+    sigma_m = float(np.median(d.range_sigma_m[d.detected]))
+    tau_m = 5.0 * sigma_m
+    at_tau = simcore.simulate(with_overrides(Scene(), {**PLATE, "quality.tau_m": tau_m}))
+    return result, at_tau, sigma_m, tau_m
+
+
+def test_a_plate_at_normal_incidence_has_true_ranges_of_distance_over_cos(plate):
+    result = plate[0]
+    attrs = result.attributes
+    target = ~attrs["is_outlier"]
+    pixel = attrs["row"][target] * PIXELS + attrs["col"][target]
+    u = result.rays.pixel_directions[pixel]
+    true_m = attrs["true_range_m"][target]
+    # the plate is the plane z = distance: a line of sight u meets it at distance / u_z; a
+    # pixel whose four sub-rays are all lit has their mean range, equal to it in the second
+    # order (below a micrometre); on the rim of the lit disc, the lit sub-rays' ranges
+    weights = result.echo.weights[np.searchsorted(result.echo.pixel, pixel)]
+    full = np.all(weights > 0, axis=1)
+    assert full.mean() > 0.8
+    assert np.abs(true_m[full] - DISTANCE_M / u[full, 2]).max() < 1e-6
+    subray_m = result.hits.range_m[pixel]
+    assert np.all((true_m >= subray_m.min(axis=1) - 1e-9) & (true_m <= subray_m.max(axis=1) + 1e-9))
+    assert np.array_equal(
+        attrs["range_error_m"][target], attrs["range_m"][target] - attrs["true_range_m"][target]
+    )
+    # the incidence is the angle of the line of sight off the plate's normal, the boresight
+    want_deg = np.degrees(np.arccos(u[:, 2]))
+    assert np.abs(attrs["incidence_deg"][target] - want_deg).max() < 0.3  # a sub-ray's, not u's
+    assert set(attrs["part_id"][target]) == {0}
+
+
+def test_false_alarms_have_no_truth_and_are_outliers(plate):
+    attrs = plate[0].attributes
+    false = attrs["is_outlier"]
+    assert false.any()
+    assert np.all(attrs["part_id"][false] == -1) and np.all(attrs["outlier"][false])
+    for name in ("true_range_m", "range_error_m", "incidence_deg"):
+        assert np.all(np.isnan(attrs[name][false]))
+
+
+def test_the_plate_is_imaged_with_precision_one_and_no_bias_at_five_sigma(plate):
+    _, result, sigma_m, tau_m = plate
+    q = result.quality
+    n = int(np.count_nonzero(~result.attributes["is_outlier"]))
+    # P(|error| > 5 sigma) = 5.7e-7 per point: with ~2,000 points none is expected
+    assert q["precision"] == 1.0
+    # the median of n normal errors has standard error sqrt(pi / 2) sigma / sqrt(n)
+    assert abs(q["range_bias_m"]) <= 4.0 * math.sqrt(math.pi / 2.0) * sigma_m / math.sqrt(n)
+    assert q["range_rmse_m"] == pytest.approx(sigma_m, rel=0.1)
+    assert q["tau_m"] == tau_m and q["seen_area_m2"] == pytest.approx(PLATE_M**2, rel=1e-9)
+
+
+def test_the_plate_recall_is_the_lit_share_within_tau_and_a_pixel(plate):
+    _, result, _, tau_m = plate
+    recall = result.quality["recall"]
+    pitch_m = DISTANCE_M * 2 * math.tan(FOV_RAD / 2) / PIXELS  # a pixel's footprint
+    assert pitch_m < tau_m  # the lit disc is then covered: no gaps between points
+    lit_share = math.pi * LIT_RADIUS_M**2 / PLATE_M**2
+    grown = math.pi * (LIT_RADIUS_M + tau_m + pitch_m) ** 2 / PLATE_M**2
+    assert lit_share <= recall <= grown
+
+
+def test_recall_agrees_with_an_independent_grid_integration(plate):
+    """The sampler (random, by area) against a regular 400 x 400 grid over the plate."""
+    _, result, _, tau_m = plate
+    target = ~result.attributes["is_outlier"]
+    pose = result.hits.pose
+    points_t = quality.to_target_frame(result.points[target], pose)
+    g = (np.arange(400) + 0.5) / 400 * PLATE_M - PLATE_M / 2
+    gx, gy = np.meshgrid(g, g)
+    grid_s = np.stack([gx.ravel(), gy.ravel(), np.full(gx.size, DISTANCE_M)], axis=1)
+    grid_t = quality.to_target_frame(grid_s, pose)  # the plate's surface, in its own frame
+    d_m, _ = cKDTree(points_t).query(grid_t)
+    want = float(np.mean(d_m <= tau_m))
+    n = result.quality["n_surface_samples"]
+    se = math.sqrt(want * (1 - want) / n)
+    assert abs(result.quality["recall"] - want) <= 4 * se + 1 / 400  # the grid's own step
+
+
+SPHERE_RADIUS_M = 1.0
+SPHERE_DISTANCE_M = 20.0
+
+
+def test_the_seen_surface_of_a_sphere_is_its_visible_cap():
+    scene = with_overrides(
+        Scene(),
+        {
+            "target.mesh": "sphere",
+            "target.size_m": 2 * SPHERE_RADIUS_M,
+            "pose.distance_m": SPHERE_DISTANCE_M,
+            "detector.pixels": 96,
+            "receive.fov_rad": 0.12,
+            "transmit.illumination": "flat_top",
+            "laser.divergence_rad": 0.12,
+            "transmit.beam_expansion_ratio": 1.0,
+        },
+    )
+    result = simcore.simulate(scene)
+    q = result.quality
+    # the cap seen from distance D: 2 pi R^2 (1 - R / D); the 96-ring polyhedron's area is
+    # within 0.1 % of the sphere's, and the seen share is a binomial proportion
+    cap_m2 = 2 * math.pi * SPHERE_RADIUS_M**2 * (1 - SPHERE_RADIUS_M / SPHERE_DISTANCE_M)
+    facets_m2 = q["seen_area_m2"] / (q["n_surface_samples"] / quality.SURFACE_SAMPLES)
+    share = cap_m2 / facets_m2
+    se_m2 = facets_m2 * math.sqrt(share * (1 - share) / quality.SURFACE_SAMPLES)
+    assert abs(q["seen_area_m2"] - cap_m2) <= 4 * se_m2 + 1e-3 * cap_m2
+    assert result.summary(quality=False)["p_detect_mean"] > 0.999 and q["precision"] > 0.99
+    # recall against the exact sphere sampled independently: uniform directions, kept where
+    # the lidar sees them (p . o > R^2 for the lidar at o), their distance to the nearest point
+    rng = np.random.default_rng(11)
+    n = 100_000
+    v = rng.standard_normal((n, 3))
+    on_sphere = SPHERE_RADIUS_M * v / np.linalg.norm(v, axis=1)[:, None]
+    lidar_t = -result.hits.pose.rotation.T @ result.hits.pose.translation_m
+    visible = on_sphere[on_sphere @ lidar_t > SPHERE_RADIUS_M**2]
+    target = ~result.attributes["is_outlier"]
+    points_t = quality.to_target_frame(result.points[target], result.hits.pose)
+    d_m, _ = cKDTree(points_t).query(visible)
+    want = float(np.mean(d_m <= q["tau_m"]))
+    se = math.sqrt(want * (1 - want) * (1 / len(visible) + 1 / q["n_surface_samples"]))
+    # the 96-ring polyhedron lies within R (1 - cos(pi / 96)) = 0.5 mm of the sphere: a slack
+    assert abs(q["recall"] - want) <= 4 * se + 0.005
+
+
+def test_parts_of_points_are_their_facets_parts_and_add_up(mro_frame):
+    result = mro_frame
+    attrs = result.attributes
+    target = ~attrs["is_outlier"]
+    q = result.quality
+    assert sum(p["n_points"] for p in q["parts"]) == int(target.sum())
+    # a pixel that sees one surface: its point's part is its strongest facet's
+    e = result.echo
+    lit = np.searchsorted(e.pixel, attrs["row"][target] * result.pixels + attrs["col"][target])
+    _, weight = pixel_surfaces(e.arrivals_s[lit], e.weights[lit], 1e-9)
+    single = np.count_nonzero(weight > 0, axis=1) == 1
+    face_part = np.asarray(result.target.face_part)
+    part = attrs["part_id"][target][single]
+    assert np.mean(part == face_part[attrs["facet_id"][target][single]]) > 0.99
+    for row in q["parts"]:
+        assert 0.0 <= row["precision"] <= 1.0 and 0.0 <= row["recall"] <= 1.0
+
+
+@pytest.fixture(scope="module")
+def mro_frame():
+    return simcore.simulate(pixels=96)
+
+
+def test_every_quality_figure_of_the_paper_scene_is_a_finite_number(mro_frame):
+    q = mro_frame.quality
+    for key, value in q.items():
+        if key != "parts":
+            assert isinstance(value, (int, float)) and math.isfinite(value), key
+    assert 0 < q["recall"] < 1 and q["precision"] > 0.95
+    assert q["f_score"] == pytest.approx(
+        2 * q["precision"] * q["recall"] / (q["precision"] + q["recall"])
+    )
+
+
+def test_a_mesh_with_zero_area_faces_gives_finite_figures(tmp_path):
+    path = tmp_path / "degenerate.obj"
+    lines = [
+        "v -1 -1 0",
+        "v 1 -1 0",
+        "v 1 1 0",
+        "v -1 1 0",
+        "v 0 0 0",
+        "v 0.5 0.5 0",
+        "f 1 2 3",
+        "f 1 3 4",
+        "f 5 5 5",  # a point
+        "f 1 5 3",  # a sliver on the diagonal: three collinear vertices
+        "f 2 2 6",
+    ]
+    path.write_text("\n".join(lines) + "\n")
+    scene = with_overrides(
+        Scene(), {**PLATE, "target.mesh": str(path), "target.size_m": 0.0, "detector.pixels": 48}
+    )
+    result = simcore.simulate(scene)
+    q = result.quality
+    assert len(result.cloud) > 0
+    for key, value in q.items():
+        if key != "parts":
+            assert value is None or math.isfinite(value), key
+    assert q["precision"] > 0.99 and q["seen_area_m2"] == pytest.approx(4.0, rel=1e-9)
+
+
+def test_the_surfaces_of_a_pixel_split_where_elements_are_a_pulse_apart():
+    arrivals = np.array([[1.0, 1.1, 5.0, 0.0], [2.0, 2.0, 2.0, 2.0]]) * 1e-9
+    weights = np.array([[1.0, 3.0, 2.0, 0.0], [1.0, 1.0, 1.0, 1.0]])
+    delay, weight = pixel_surfaces(arrivals, weights, gap_s=1e-9)
+    assert delay[0, 0] == pytest.approx((1.0 * 1.0 + 3.0 * 1.1) / 4.0 * 1e-9)
+    assert delay[0, 1] == pytest.approx(5e-9) and np.isnan(delay[0, 2:]).all()
+    assert list(weight[0]) == [4.0, 2.0, 0.0, 0.0] and delay[1, 0] == pytest.approx(2e-9)
+
+
+@pytest.mark.parametrize("bad", [0.0, -0.01, float("nan"), float("inf"), "5 cm"])
+def test_a_bad_tau_is_refused_with_one_message_naming_the_key(bad):
+    with pytest.raises(SceneError, match=r"quality\.tau_m"):
+        with_overrides(Scene(), {"quality.tau_m": bad})
+
+
+def test_quality_is_computed_only_when_asked_for():
+    pipeline = simcore.Pipeline()
+    result = pipeline.run(with_overrides(Scene(), {"detector.pixels": 32}))
+    assert "quality" not in result.timings_s and "quality" not in result.extras
+    assert "quality" not in result.summary(quality=False)
+    with_quality = pipeline.run(result.scene, extras=("quality",))
+    assert with_quality.extras["quality"] == result.quality
+    with pytest.raises(ValueError, match="optional stage"):
+        pipeline.run(result.scene, extras=("colour",))

@@ -184,6 +184,7 @@ def stage_background(scene: Scene, tgt: geometry.TargetStage, hits: geometry.Hit
     from . import sun  # noqa: PLC0415  (the ephemeris and orbits: only with a Sun)
 
     geo = sun.sun_geometry(scene)
+    assert geo is not None  # None only for sun.mode = none, returned above
     rx = scene.receive
     irradiance = (
         sun.in_band_irradiance_w_m2(scene.laser.wavelength_m, rx.filter_width_m)

@@ -13,7 +13,7 @@ import os
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
-from typing import BinaryIO
+from typing import IO
 
 CACHE_ENV = "LMAPD_CACHE_DIR"
 
@@ -27,7 +27,7 @@ def cache_dir() -> Path | None:
     return Path(base) / "lmapd-sim"
 
 
-def write_atomically(file: Path, write: Callable[[BinaryIO], None], max_entries: int) -> None:
+def write_atomically(file: Path, write: Callable[[IO[bytes]], object], max_entries: int) -> None:
     """Create or replace the entry ``file`` with what ``write`` writes to the open file it is
     given, atomically; then keep the ``max_entries`` most recently written entries of its folder
     (those with its suffix).

@@ -13,7 +13,7 @@ from scipy import special
 from .constants import C
 
 
-def detection_probability(i_pk_a, threshold_a: float, sigma_pk_a):
+def detection_probability(i_pk_a, threshold_a: float | np.ndarray, sigma_pk_a):
     """Eq. 27 (ours): P_d = 0.5 + 0.5 erf((i_pk - V_T) / (sqrt 2 sigma_pk)).
 
     The threshold V_T = TNR sigma_n is set on signal-free noise; the peak carries its own shot noise
@@ -24,7 +24,7 @@ def detection_probability(i_pk_a, threshold_a: float, sigma_pk_a):
     return 0.5 * special.erfc(-(i - threshold_a) / (np.sqrt(2.0) * s))
 
 
-def detection_probability_paper(snr, tnr: float):
+def detection_probability_paper(snr, tnr: float | np.ndarray):
     """Eq. 27 as printed: 0.5 + 0.5 erf((SNR - TNR) / sqrt 2) (thermal noise only)."""
     return 0.5 * special.erfc(-(np.asarray(snr, dtype=np.float64) - tnr) / np.sqrt(2.0))
 
@@ -34,13 +34,17 @@ def rice_rate_hz(bandwidth_hz: float) -> float:
     return np.sqrt(2.0 / np.pi) * bandwidth_hz
 
 
-def false_alarms_per_pixel(tnr: float, gate_m: float, bandwidth_hz: float) -> float:
+def false_alarms_per_pixel(
+    tnr: float | np.ndarray, gate_m: float, bandwidth_hz: float
+) -> np.ndarray:
     """Eq. 28 (ours, Rice): expected false triggers per pixel per pulse in a gate of R_gate,
     (2 R_gate / c) nu0 exp(-TNR^2 / 2)."""
     return 2.0 * gate_m / C * rice_rate_hz(bandwidth_hz) * np.exp(-(tnr**2) / 2.0)
 
 
-def false_alarms_per_pixel_paper(tnr: float, gate_m: float, df_hz: float) -> float:
+def false_alarms_per_pixel_paper(
+    tnr: float | np.ndarray, gate_m: float, df_hz: float
+) -> np.ndarray:
     """Eq. 28 as printed: 2.2 (2 R_gate / c) df 0.5 erfc(TNR / sqrt 2)."""
     return 2.2 * (2.0 * gate_m / C) * df_hz * 0.5 * special.erfc(tnr / np.sqrt(2.0))
 

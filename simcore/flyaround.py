@@ -123,7 +123,7 @@ class FlyaroundResult:
         """
         d = self.pose.distance_m
         if self.tles is None:
-            orbits = {
+            orbits: dict[str, Any] = {
                 "target": dataclasses.asdict(self.target),
                 "imaging": dataclasses.asdict(self.imaging),
             }

@@ -355,7 +355,7 @@ class Hits:
     @property
     def hit_pixel_mask(self) -> np.ndarray:
         """(n_pix,) bool: the pixel sees the target with at least one sub-ray."""
-        mask = (self.base.face >= 0).any(axis=1)
+        mask = np.asarray((self.base.face >= 0).any(axis=1))
         if self.refined is not None:
             mask[self.refined.pixel] = (self.refined.face >= 0).any(axis=1)
         return mask
@@ -561,7 +561,7 @@ def cell_spread_m(block: HitBlock, corners: CornerSamples | None = None) -> np.n
 def straddles(corner_values: np.ndarray) -> np.ndarray:
     """(n, n) bool: the pixel's four corners disagree, from an (n + 1, n + 1) bool corner image."""
     q = _quad(corner_values)
-    return q.any(axis=0) & ~q.all(axis=0)
+    return np.asarray(q.any(axis=0) & ~q.all(axis=0))
 
 
 def probe(caster: RayCaster, rays: RayGrid, pose: PoseInSensor) -> CornerSamples:

@@ -228,7 +228,7 @@ def inspect_gltf(data: bytes, binary_container: bool, folder: Path | None = None
         b = view.get("buffer")
         buffer = _index(b, buffers, "buffer")
         if b not in loaded:
-            loaded[b] = _buffer_bytes(buffer, binary, folder, b)
+            loaded[b] = _buffer_bytes(buffer, binary, folder, b)  # type: ignore[arg-type]  # an int: _index checked it
         start = _count(view.get("byteOffset", 0), "bufferView byteOffset")
         length = _count(view.get("byteLength"), "bufferView byteLength")
         if start + length > len(loaded[b]):

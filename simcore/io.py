@@ -14,6 +14,7 @@ import json
 import os
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from plyfile import PlyData, PlyElement
@@ -200,7 +201,7 @@ def waveform_cube(result) -> dict[str, np.ndarray]:
 
 def write_waveforms_npz(path: str | Path, result) -> None:
     """The waveform cube (lit pixels x time) as a compressed NPZ."""
-    cube = waveform_cube(result)
+    cube: dict[str, Any] = waveform_cube(result)
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:
             np.savez_compressed(fh, **cube)

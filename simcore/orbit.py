@@ -263,7 +263,8 @@ def elements_to_state(el: Elements, mu: float = MU_EARTH_M3_S2) -> tuple[FloatAr
     v_m_s : (3,) float
         Velocity [m/s].
     """
-    r_m, v_m_s = _states(*(np.array([x]) for x in _elements_rad(el)), mu)
+    a_m, e, i_rad, raan_rad, argp_rad, m_rad = (np.array([x]) for x in _elements_rad(el))
+    r_m, v_m_s = _states(a_m, e, i_rad, raan_rad, argp_rad, m_rad, mu)
     return r_m[0], v_m_s[0]
 
 

@@ -74,7 +74,7 @@ def assemble_cloud(
     rng_m = np.concatenate([target_range_m, outlier_range_m])
     n_t, n_o = len(target_pixel), len(outlier_pixel)
     points = pixel_directions[pix] * rng_m[:, None]
-    attrs = {
+    attrs: dict[str, np.ndarray] = {
         "row": (pix // pixels).astype(np.int32),
         "col": (pix % pixels).astype(np.int32),
         "range_m": rng_m.astype(np.float64),
@@ -139,7 +139,9 @@ def pixel_surfaces(arrivals_s, weights, gap_s: float) -> tuple[np.ndarray, np.nd
     n, k = w.shape
     lit = w > 0
     order = np.argsort(np.where(lit, a, np.inf), axis=1, kind="stable")
-    a, w, lit = (np.take_along_axis(x, order, axis=1) for x in (a, w, lit))
+    a = np.take_along_axis(a, order, axis=1)
+    w = np.take_along_axis(w, order, axis=1)
+    lit = np.take_along_axis(lit, order, axis=1)
     new = np.ones((n, k), dtype=bool)
     new[:, 1:] = a[:, 1:] - a[:, :-1] > gap_s
     slot = np.arange(n)[:, None] * k + np.cumsum(new, axis=1) - 1

@@ -228,7 +228,7 @@ def mc_tnr_grid(s: ReproduceSettings) -> np.ndarray:
 def subray_parts(result: Result) -> dict[int, np.ndarray]:
     """Flat pixel index -> part index of each sub-ray's first hit (-1 for a miss)."""
     face_part = result.target.face_part
-    parts = {}
+    parts: dict[int, np.ndarray] = {}
     for block in result.hits.blocks():
         part = np.where(block.face >= 0, face_part[np.maximum(block.face, 0)], -1)
         parts.update(zip(block.pixel.tolist(), part, strict=True))
@@ -292,7 +292,7 @@ def find_pixels(result: Result) -> dict[str, Any]:
         if all_cover[i] and peaks(i) == 1:
             dish = i
             break
-    found = {}
+    found: dict[str, dict[str, Any] | None] = {}
     for key, i in (("double_peak", double), ("dish", dish)):
         if i is None:
             found[key] = None
@@ -346,7 +346,7 @@ def convention_row(result: Result) -> dict[str, Any]:
     r = attrs["range_m"][tgt]
     extent = float(np.percentile(r, 99) - np.percentile(r, 1)) if len(r) else None
     row = {k: summary[k] for k in CONVENTION_COLUMNS if k in summary}
-    row["peak_current_median_a"] = finite_median(result.receiver.i_pk_a)
+    row["peak_current_median_a"] = finite_median(result.receiver.i_pk_a)  # type: ignore[attr-defined]  # the paper's LM-APD
     d = result.detection
     sigma_t = timing.sigma_quantisation_m(result.scene.timing.resolution_s)
     cfd = np.sqrt(np.maximum(d.range_sigma_m[d.detected] ** 2 - sigma_t**2, 0.0))

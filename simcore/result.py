@@ -129,7 +129,7 @@ class Result:
         if i >= len(e.pixel) or e.pixel[i] != row * n + col:
             return _no_echo(row, col, threshold_w, background_w)
         energy_j = self.scene.laser.pulse_energy_j
-        t_s, raw, filt = e.waveform_per_j(i)
+        t_s, raw, filt = e.waveform_per_j(int(i))
         peak_w = self.receiver.peak_power_w[i]
         t_ref_s = e.shape.t0_s + e.shape.step_s * np.arange(len(e.shape.filtered))
         keep = (t_ref_s >= e.shape.t_start_s) & (t_ref_s <= e.shape.t_end_s)

@@ -27,7 +27,7 @@ import zipfile
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
@@ -508,7 +508,7 @@ def load_mesh_file(
     if kind not in ("glb", "gltf"):
         for mesh in meshes:
             mesh.process()
-    return loaded
+    return cast("trimesh.Trimesh | trimesh.Scene", loaded)  # trimesh.load: one of the two here
 
 
 @dataclass(frozen=True)
@@ -557,7 +557,8 @@ def _opacity(mesh: trimesh.Trimesh) -> float:
         return 1.0
     factor = getattr(material, "baseColorFactor", None)
     alpha = 1.0 if factor is None else float(np.asarray(factor)[3]) / 255.0
-    if getattr(material, "baseColorTexture", None) is not None and len(mesh.vertices):
+    textured = getattr(material, "baseColorTexture", None) is not None
+    if visual is not None and textured and len(mesh.vertices):
         try:
             colours = visual.to_color().vertex_colors
             alpha *= float(np.median(np.asarray(colours)[:, 3])) / 255.0
@@ -573,6 +574,7 @@ def _geometry(path: Path | None, settings: dict) -> MeshGeometry:
     """A calibration shape's geometry (built), or a mesh file's (read or cached)."""
     shape = settings.get("shape")
     if shape is None:
+        assert path is not None  # a target is a mesh file or a calibration shape
         return mesh_geometry(path)
     vertices, faces = calibration.shape_mesh(shape)
     return MeshGeometry(
@@ -595,7 +597,7 @@ def likely_unit(longest: float) -> str | None:
     return min(fits, key=lambda u: abs(math.log(fits[u] / 10.0)))
 
 
-def _size_warning(path: Path | None, longest_units: float, scale: float) -> str | None:
+def _size_warning(path: Path | str | None, longest_units: float, scale: float) -> str | None:
     """A warning for a mesh scaled (by a given or default metres per unit) to a size no
     spacecraft has, naming the unit the mesh is likely in; None for a plausible size."""
     longest_m = longest_units * scale

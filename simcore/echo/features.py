@@ -315,7 +315,8 @@ def features_numpy(
         rows = np.flatnonzero(count == k)
         for pixels, args in _jobs(shape, arr[rows, :k], wts[rows, :k], rows, dt_s, cfd_delay_s,
                                   begin[k], max_elements):  # fmt: skip
-            for i, v in enumerate(_features_chunk(shape, *args, cfd_fraction, raw_peak)):
+            chunk = _features_chunk(shape, *args, cfd_fraction, raw_peak)  # type: ignore[call-arg]
+            for i, v in enumerate(chunk):
                 if v is not None:
                     out[pixels, i] = v
     return out

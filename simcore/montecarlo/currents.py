@@ -107,6 +107,7 @@ def noisy_band_limited(
     taps = band.taps.astype(x.dtype)[None, :]
     rows = np.flatnonzero((x > 0).any(axis=1)) if add_signal or noise else np.zeros(0, np.int64)
     if noise and photon is not None:  # photon statistics (montecarlo.photon.PhotonNoise)
+        assert rng is not None and receiver is not None  # noise needs both
         white = rng.standard_normal(x.shape, dtype=x.dtype)
         white *= x.dtype.type(photon.gaussian_sigma_a(receiver, dt))
         photon.add_noise(rng, white, x, dt, receiver)
@@ -116,6 +117,7 @@ def noisy_band_limited(
             white += (rng.standard_normal(x.shape) * (sigma_w * extra)[:, None]).astype(x.dtype)
         y = signal.fftconvolve(white, taps, mode="valid", axes=1)
     elif noise:
+        assert rng is not None and receiver is not None  # noise needs both
         white = rng.standard_normal(x.shape, dtype=x.dtype)
         white *= x.dtype.type(receiver.sigma_n_a / math.sqrt(2.0 * dt * receiver.bandwidth_hz))
         if row_scale is not None:

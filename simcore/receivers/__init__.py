@@ -25,7 +25,7 @@ from __future__ import annotations
 import importlib
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -116,7 +116,8 @@ class Receiver:
     response_reads: Callable[[Scene], tuple]
     respond: Callable[[Scene, EchoStage, Background], Response]
     detection_reads: Callable[[Scene], tuple]
-    detect: Callable[[Scene, EchoStage, Response], Detection]
+    # the response is this receiver's own (a subclass of Response that its respond returned)
+    detect: Callable[[Scene, EchoStage, Any], Detection]
 
 
 def register(receiver: Receiver) -> Receiver:

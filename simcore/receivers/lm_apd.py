@@ -16,6 +16,7 @@ The model: docs/physics.md#receiver, docs/physics.md#detection, docs/physics.md#
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -76,8 +77,11 @@ def respond(scene: Scene, echo: EchoStage, background: Background) -> LmApdRespo
     )
     energy_j = scene.laser.pulse_energy_j
     peak_w = echo.features.peak_w_per_j * energy_j
-    raw = scene.uses("unfiltered_peak")
-    snr_peak_w = echo.features.peak_raw_w_per_j * energy_j if raw else peak_w
+    snr_peak_w = peak_w
+    if scene.uses("unfiltered_peak"):
+        raw_w_per_j = echo.features.peak_raw_w_per_j
+        assert raw_w_per_j is not None  # the echo stage keeps it for this option
+        snr_peak_w = raw_w_per_j * energy_j
     i_pk_a = rx.responsivity_a_w * snr_peak_w
     if background.any_light:
         return _respond_with_background(scene, echo, background, rx, peak_w, i_pk_a)
@@ -184,7 +188,7 @@ def detect(scene: Scene, echo: EchoStage, rx: LmApdResponse) -> LmApdDetection:
         # false alarms; P_d and sigma above stay the statistical model's, for comparison
         from .. import montecarlo  # noqa: PLC0415  (imported only when the MC model is asked for)
 
-        extra = {}
+        extra: dict[str, Any] = {}
         if rx.background_a is not None:
             extra = {
                 "background_a": rx.background_a,

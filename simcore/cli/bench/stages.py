@@ -74,7 +74,7 @@ def _median_run(pipe: Pipeline, scenes, repeats: int, caster=None, rays=None):
     each frame (median, min, max [s]), and the frame / ray-cast ratio taken round by round."""
     pipe.run(scenes[0])
     pipe.run(scenes[1])  # warm both
-    per_stage = {s: [] for s in STAGES}
+    per_stage: dict[str, list[float]] = {s: [] for s in STAGES}
     totals, casts = [], []
     for i in range(repeats):
         result = pipe.run(scenes[i % 2])

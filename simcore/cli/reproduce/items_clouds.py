@@ -198,7 +198,7 @@ def item_flyaround(run: ReproduceRun) -> dict[str, Any]:
 
 def item_conventions(run: ReproduceRun) -> dict[str, Any]:
     s = run.settings
-    variants = [("ours", {})]
+    variants: list[tuple[str, dict[str, Any]]] = [("ours", {})]
     variants += [(form, {"paper_forms": [form]}) for form in PAPER_FORMS]
     variants.append(("paper (all)", {"conventions": "paper"}))
     rows, scenes = [], {}

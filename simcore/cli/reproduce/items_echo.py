@@ -106,17 +106,18 @@ def item_detection(run: ReproduceRun) -> dict[str, Any]:
 
     # false alarms: noise-only pixels over the whole 1 km gate
     fa_tnr = np.array(s.mc_fa_tnrs)
-    fa_counts, fa_pixels = [], []
+    counts: list[int] = []
+    pixels: list[int] = []
     for j, tnr in enumerate(fa_tnr):
         per_pixel = detection.false_alarms_per_pixel(tnr, FIG9_GATE_M, b_hz)
         n_px = int(min(s.mc_fa_max_pixels, math.ceil(s.mc_fa_target_count / per_pixel)))
         empty = np.zeros((0, 1))
         res = gate(run.rng(3, j), empty, empty, n_px, float(tnr), FIG9_GATE_M)
-        fa_counts.append(res.n_false_alarms)
-        fa_pixels.append(n_px)
+        counts.append(res.n_false_alarms)
+        pixels.append(n_px)
         run.step(f"false-alarm Monte Carlo, TNR {tnr:g}")
-    fa_counts = np.array(fa_counts, dtype=np.float64)
-    fa_pixels = np.array(fa_pixels, dtype=np.float64)
+    fa_counts = np.array(counts, dtype=np.float64)
+    fa_pixels = np.array(pixels, dtype=np.float64)
     fa_mc = fa_counts / fa_pixels
     fa_curve_tnr = np.linspace(1.0, 8.0, 141)
     rice = detection.false_alarms_per_pixel(fa_curve_tnr, FIG9_GATE_M, b_hz)

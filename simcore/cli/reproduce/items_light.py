@@ -45,13 +45,13 @@ def item_daylight(run: ReproduceRun) -> dict[str, Any]:
     axes = fig.subplots(1, 3)
     labels = [r["case"] for r in rows]
     x = np.arange(len(rows))
-    panels = (
+    panels: tuple[tuple[str, str, float], ...] = (
         ("n_target_points", "target points", 1.0),
         ("n_outliers", "outliers (false alarms)", 1.0),
         ("range_sigma_m_median", "range sigma median [mm]", 1e3),
     )
     for ax, (key, title, scale) in zip(axes, panels, strict=True):
-        values = [(r[key] or 0.0) * scale for r in rows]
+        values = [float(r[key] or 0.0) * scale for r in rows]
         ax.bar(x, values, color=["0.35", "C1", "C3"])
         for xx, v in zip(x, values, strict=True):
             text = f"{v:,.0f}" if v >= 100 else f"{v:.3g}"

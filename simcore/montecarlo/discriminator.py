@@ -292,6 +292,7 @@ def discriminate(
     t0_s=0.0,
     x_padded_a=None,
     band: BandLimit | None = None,
+    t_open_s: float = -np.inf,
 ) -> Stops:
     """Arming comparator + constant-fraction discriminator over whole waveforms (Eq. 19).
 
@@ -316,6 +317,8 @@ def discriminate(
         made ``y_a``; with ``band`` the arming is continuous-time (between-sample excursions
         found exactly); without, only crossings between samples arm (a sampled comparator).
     band : BandLimit, optional
+    t_open_s : float -- the TDC's gate opens here [s]: a stop (t*) before it is not recorded and
+        neither counts towards ``max_stops`` nor holds off later ones
 
     Returns
     -------
@@ -334,9 +337,12 @@ def discriminate(
     jpk = _first_local_max(y, row, j)
     t_d = t_d_s / dt_s
     t_star, fired = _cfd_stop(y, row, t_a, jpk, t_d, cfd_fraction)
+    t0 = np.broadcast_to(np.asarray(t0_s, dtype=np.float64), (y.shape[0],))
+    if t_open_s > -np.inf:
+        gated = t0[row] + t_star * dt_s >= t_open_s
+        row, t_a, t_star, fired = row[gated], t_a[gated], t_star[gated], fired[gated]
     accepted = _apply_holdoff(row, t_a, t_star, holdoff_s / dt_s, first_stop, max_stops)
     row, t_a, t_star, fired = row[accepted], t_a[accepted], t_star[accepted], fired[accepted]
-    t0 = np.broadcast_to(np.asarray(t0_s, dtype=np.float64), (y.shape[0],))
     return Stops(row.astype(np.int64), t0[row] + t_star * dt_s, t0[row] + t_a * dt_s, fired)
 
 

@@ -99,6 +99,9 @@ class _GateSetup:
     noise_scale: np.ndarray | None = None  # (n_total,) sigma_n,pixel / sigma_n (background)
     per_pixel_threshold: bool = False  # arm at TNR sigma_n,pixel instead of TNR sigma_n
     photon: Any = None  # photon.PhotonNoise, or None for Gaussian shot and dark noise
+    # the range gate [m]: the TDC records stops from the time a surface at its near edge gives
+    # (its opening plus t_ref) and counts no time before its opening (Eq. 26's quantisation)
+    gate_m: tuple[float, float] = (0.0, math.inf)
 
 
 def _signal_into(x: np.ndarray, setup: _GateSetup, lit: np.ndarray, local_rows: np.ndarray):
@@ -204,6 +207,7 @@ def _gate_chunk(setup: _GateSetup, p0: int, p1: int, rng: np.random.Generator):
         t0_s=setup.t_lo,
         x_padded_a=x if setup.continuous else None,
         band=setup.band if setup.continuous else None,
+        t_open_s=2.0 * setup.gate_m[0] / C + setup.t_ref_s,
     )
     del x, y
     # Eq. 26: e1 per stop, e2 per pixel (each pixel's TDC registers the start once)
@@ -222,7 +226,7 @@ def _gate_chunk(setup: _GateSetup, p0: int, p1: int, rng: np.random.Generator):
         "pixel": pixel,
         "lit": lit_idx,
         "t_s": stops.t_s,
-        "range_m": 0.5 * C * tof,
+        "range_m": np.clip(0.5 * C * tof, *setup.gate_m),
         "detection": is_lit & in_window,
         "unfired": int(np.count_nonzero(~stops.fired)),
     }
@@ -353,6 +357,7 @@ def montecarlo_gate(
         noise_scale=_noise_scale(receiver, background_a, n_pixels_total),
         per_pixel_threshold=bool(per_pixel_threshold),
         photon=photon,
+        gate_m=(max(0.0, gate_center_m - 0.5 * gate_m), gate_center_m + 0.5 * gate_m),
     )
     rows = max(1, int(max_bytes) // (_BYTES_PER_SAMPLE * (n_samples + 2 * band.half_width)))
     bounds = [(p, min(p + rows, n_pixels_total)) for p in range(0, n_pixels_total, rows)]

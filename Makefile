@@ -5,18 +5,27 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 HOST ?= 127.0.0.1
 PORT ?= 8080
+LINT_PATHS := simcore app tests scripts assets setup.py
 
 .PHONY: app test bench soak lint format chromium clean
 
-$(STAMP): pyproject.toml
+# The first run creates .venv and installs the project and its dependencies into it (about
+# 3 minutes with a fast connection: numpy, scipy, VTK and trame are large); later runs start at once.
+$(STAMP): pyproject.toml setup.py
 	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "lmapd-sim needs Python >= 3.11"'
-	$(PYTHON) -m venv $(VENV)
-	$(BIN)/pip install --quiet --upgrade pip
+	@echo "make: creating the Python environment in $(VENV)/ (first run only)"
+	@$(PYTHON) -m venv $(VENV)
+	@echo "make: installing lmapd-sim and its dependencies into $(VENV)/ (first run: about 3 minutes)"
+	@$(BIN)/pip install --quiet --upgrade pip 'setuptools>=77'
 	$(BIN)/pip install --quiet -e '.[app,test]'
 	@touch $(STAMP)
+	@echo "make: environment ready"
 
 ## make app: serve the app on http://127.0.0.1:8080 with the built-in paper scene
+##   make app PORT=8090           another port
+##   make app HOST=0.0.0.0        reachable from other machines (a classroom): see the docs
 app: $(STAMP)
+	@echo "make: starting the app on $(HOST):$(PORT); it prints its address when it is ready (about 3 s). Ctrl+C stops it"
 	$(BIN)/lmapd app --host $(HOST) --port $(PORT)
 
 ## make test: every test, the browser test in Debian's headless Chromium included
@@ -31,12 +40,14 @@ bench: $(STAMP)
 soak: $(STAMP) chromium
 	$(BIN)/python scripts/soak_app.py
 
+## make lint: what CI checks before the tests: ruff (lint, unused noqa, format) and mypy on simcore/
 lint: $(STAMP)
-	$(BIN)/ruff check simcore app tests
-	$(BIN)/ruff format --check simcore app tests
+	$(BIN)/ruff check $(LINT_PATHS)
+	$(BIN)/ruff format --check $(LINT_PATHS)
+	$(BIN)/mypy
 
 format: $(STAMP)
-	$(BIN)/ruff format simcore app tests
+	$(BIN)/ruff format $(LINT_PATHS)
 
 # The browser test needs Chromium from Debian (never `playwright install`): install it if missing.
 chromium:

@@ -72,7 +72,7 @@ def run_frame(scene: Scene, pipeline: Pipeline, want_cloud: bool = False) -> Fra
         cloud = result.cloud if want_cloud else None
         line = f"target {result.target.name}; {result.target.credit}"
         return FrameOutcome(metrics, None, time.perf_counter() - start, cloud, line)
-    except Exception as exc:  # noqa: BLE001  (a failed frame is recorded; the sweep goes on)
+    except Exception as exc:  # a failed frame is recorded; the sweep goes on
         pipeline.clear()  # a half-updated cache is not trusted
         return FrameOutcome(None, _error_text(exc), time.perf_counter() - start)
 

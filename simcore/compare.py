@@ -1,8 +1,11 @@
 """The same scene with both receivers (``lmapd compare``): the LM-APD's single flash against the
 Geiger-mode array's frame over distance and pulse energy (docs/physics.md#geiger-mode).
 
-Per (receiver, distance, pulse energy): target points, range noise (the rms of measured less
-noise-free range over the detected pixels), outliers, and the pulses needed for a detection
+Per (receiver, distance, pulse energy): target points, the range error of the detected pixels
+(measured less the noise-free range: its rms, its median, the bias, and its sd about the mean,
+the noise; for the Geiger-mode array the noise-free range is the echo's energy-weighted one, so a
+piled-up histogram's bias shows as bias, not noise, beside the receiver's predicted bias and
+sd), outliers, and the pulses needed for a detection
 probability ``p_target`` in the median lit pixel: for the LM-APD, independent flashes with its
 per-flash P_d (Eq. 27) until one detects, ceil(ln(1 - P) / ln(1 - P_d)); for the Geiger-mode
 array, the least frame length N whose P_d (counts of N pulses against the threshold) reaches P.
@@ -32,6 +35,10 @@ class Row:
     n_lit: int
     n_points: int
     range_noise_m: float
+    range_bias_m: float
+    range_sd_m: float
+    predicted_bias_m: float
+    predicted_sd_m: float
     n_outliers: int
     pulses_needed: float
     signal_pe_median: float
@@ -89,6 +96,12 @@ def compare(
                         n_lit=s["n_lit_pixels"],
                         n_points=s["n_target_points"],
                         range_noise_m=float(np.sqrt(np.mean(err**2))) if len(err) else math.nan,
+                        range_bias_m=float(np.median(err)) if len(err) else math.nan,
+                        range_sd_m=float(np.std(err)) if len(err) > 1 else math.nan,
+                        predicted_bias_m=_figure(
+                            s, "gm.range_bias_m", 0.0 if kind == "lm_apd" else None
+                        ),
+                        predicted_sd_m=_figure(s, "gm.range_sigma_m", s["range_sigma_m_median"]),
                         n_outliers=s["n_outliers"],
                         pulses_needed=pulses_needed(scene, res, p_target),
                         signal_pe_median=float(np.median(pe))
@@ -99,3 +112,9 @@ def compare(
                 if progress is not None:
                     progress(rows[-1])
     return rows
+
+
+def _figure(summary: dict, key: str, default) -> float:
+    """A summary figure as a float (NaN where absent or undefined)."""
+    v = summary.get(key, default)
+    return math.nan if v is None else float(v)

@@ -47,14 +47,16 @@ def run_cli(args: argparse.Namespace) -> int:
         scene = with_overrides(scene, {"pixels": 32 if args.quick else 64})
     say(
         f"{'receiver':8} {'distance_m':>10} {'energy_j':>9} {'pe':>9} {'points':>6} "
-        f"{'noise_m':>8} {'outl':>5} {'pulses':>6}"
+        f"{'rms_m':>8} {'bias_m':>8} {'sd_m':>8} {'pred_b_m':>8} {'pred_sd_m':>9} "
+        f"{'outl':>5} {'pulses':>6}"
     )
 
     def line(r) -> None:
         say(
             f"{r.receiver:8} {r.distance_m:10.0f} {r.pulse_energy_j:9.1e} "
             f"{r.signal_pe_median:9.3g} {r.n_points:6d} {r.range_noise_m:8.3g} "
-            f"{r.n_outliers:5d} {r.pulses_needed:6g}"
+            f"{r.range_bias_m:8.3g} {r.range_sd_m:8.3g} {r.predicted_bias_m:8.3g} "
+            f"{r.predicted_sd_m:9.3g} {r.n_outliers:5d} {r.pulses_needed:6g}"
         )
 
     rows = compare(scene, p_target=args.p_detect, progress=line)
@@ -73,17 +75,19 @@ def run_cli(args: argparse.Namespace) -> int:
 
 
 def draw(rows, path: Path, p_target: float) -> None:
-    """Four panels against distance: points, range noise, outliers, pulses for ``p_target``;
-    one line per receiver and pulse energy."""
+    """Five panels against distance: points, range bias (|median error|), range noise (sd
+    about the mean), outliers, pulses for ``p_target``; one line per receiver and pulse
+    energy."""
     import matplotlib  # noqa: PLC0415
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt  # noqa: PLC0415
 
-    fig, axes = plt.subplots(1, 4, figsize=(16, 3.8))
+    fig, axes = plt.subplots(1, 5, figsize=(20, 3.8))
     panels = (
         ("n_points", "target points"),
-        ("range_noise_m", "range noise, rms [m]"),
+        ("range_bias_m", "range bias, |median error| [m]"),
+        ("range_sd_m", "range noise, sd [m]"),
         ("n_outliers", "outliers"),
         ("pulses_needed", f"pulses for P_d = {p_target:g}"),
     )
@@ -94,10 +98,11 @@ def draw(rows, path: Path, p_target: float) -> None:
                 sel = [r for r in rows if r.receiver == kind and r.pulse_energy_j == e]
                 x = [r.distance_m for r in sel]
                 y = [getattr(r, field) for r in sel]
+                y = [abs(v) for v in y] if field == "range_bias_m" else y
                 y = [v if math.isfinite(v) else float("nan") for v in y]
                 ax.plot(x, y, styles[kind], label=f"{kind}, {e:g} J")
         ax.set_xscale("log")
-        if field in ("range_noise_m", "pulses_needed"):
+        if field in ("range_bias_m", "range_sd_m", "pulses_needed"):
             ax.set_yscale("log")
         ax.set_xlabel("distance [m]")
         ax.set_title(label)

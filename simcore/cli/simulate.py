@@ -72,6 +72,10 @@ def run_cli(args: argparse.Namespace) -> int:
         f"{summary['n_dropped']} of {summary['n_lit_pixels']} lit pixels dropped) "
         f"-> {out}  [{total_ms:.0f} ms]"
     )
+    for line in summary.get("warnings", []):
+        say(f"warning: {line}")
+    if summary.get("gm.range_bias_m") is not None:
+        say(gm_line(summary))
     if scene.sun.mode != "none":
         say(background_line(summary))
     return 0
@@ -90,4 +94,16 @@ def background_line(summary: dict) -> str:
         f"target pixels, {summary['n_earth_pixels']} Earth pixels, "
         f"{summary['n_false_expected']:.3g} false alarms expected"
         + (f", {summary['n_saturated']} saturated" if summary["n_saturated"] else "")
+    )
+
+
+def gm_line(summary: dict) -> str:
+    """One line of the Geiger-mode range figures: predicted bias and sd as the histogram
+    gives them, and the piled-up share of the lit pixels."""
+    sigma = summary.get("gm.range_sigma_m")
+    return (
+        f"Geiger mode: range bias {1e3 * summary['gm.range_bias_m']:+.1f} mm, sd "
+        f"{1e3 * (sigma if sigma is not None else float('nan')):.1f} mm (predicted for the "
+        f"histogram's estimator); {100 * summary['gm.saturated_pixel_fraction']:.0f} % of the "
+        f"lit pixels piled up (median {summary['gm.signal_pe_median']:.3g} photoelectrons a pulse)"
     )

@@ -510,14 +510,17 @@ SATURATED_SHARE = 1.0 - np.exp(-1.0)  # a pixel is piled up when its echo fires 
 
 
 def pileup_figures(scene: Scene, signal_pe, bias_m, sigma_m, detected) -> dict:
-    """The summary's Geiger-mode figures: the predicted range bias and sd as the histogram
-    gives them (medians over the detected pixels) [m], the share of lit pixels whose echo
+    """The summary's Geiger-mode figures: the predicted range bias and scatter as the
+    histogram gives them (the median bias, and the sd of the detected pixels' errors about
+    their mean: sqrt(mean sigma_i^2 + Var b_i)) [m], the share of lit pixels whose echo
     fires them in more than 1 - 1/e of the pulses (over one photoelectron per pulse: piled
     up), and a warning when most are."""
     sel = detected & np.isfinite(bias_m)
     sat = float(np.mean(signal_pe > 1.0)) if len(signal_pe) else 0.0
     bias = float(np.median(bias_m[sel])) if sel.any() else None
-    sigma = float(np.median(sigma_m[sel])) if sel.any() else None
+    # the cloud's scatter about its mean: each pixel's sd and the spread of the pixels' biases
+    spread = np.mean(sigma_m[sel] ** 2) + np.var(bias_m[sel]) if sel.any() else np.nan
+    sigma = float(np.sqrt(spread)) if np.isfinite(spread) else None
     figures: dict = {
         "gm.range_bias_m": bias,
         "gm.range_sigma_m": sigma,

@@ -184,7 +184,14 @@ def coates_bin_moments(
         )
         e1[sel] = (p * m1).sum(axis=1)
         e2[sel] = (p * m2).sum(axis=1)
-    large = (mean_a >= SMALL_MEAN_A) & (h > 0)
+    # many armed pulses and a small hazard: the delta method (no clipping, A concentrated)
+    plain = (mean_a >= SMALL_MEAN_A) & (h > 0) & (h < 0.2)
+    if plain.any():
+        mu, hp = mean_a[plain], h[plain]
+        m1 = -np.log1p(-hp) + hp / (2.0 * mu * (1.0 - hp))
+        e1[plain] = m1
+        e2[plain] = hp / (mu * (1.0 - hp)) + m1 * m1
+    large = (mean_a >= SMALL_MEAN_A) & (h >= 0.2)
     if large.any():
         mu = mean_a[large][:, None]
         sd = np.sqrt(mu * (1.0 - alpha[large][:, None]))
@@ -250,7 +257,7 @@ def expected_histogram(
     else:
         kern = (kern_x == 0).astype(float)
     dead_cells = t.dead_time_s / dt
-    dead_bins = int(round(t.dead_time_s / t.bin_s))
+    dead_bins = int(round(t.dead_time_s / t.bin_s)) if dead_cells < n_cells else n_bins
     for lo in range(0, n, ROW_BLOCK):
         sl = slice(lo, lo + ROW_BLOCK)
         t0 = start_bin[sl, None] * t.bin_s  # window start, from the gate's opening

@@ -242,6 +242,16 @@ def gate_samples(gate_center_m: float, gate_m: float, dt_s: float) -> tuple[floa
     return t_lo, int(math.floor((t_hi - t_lo) / dt_s)) + 1
 
 
+def lead_samples(first_arrival_s: float, t_lo_s: float, dt_s: float, band: BandLimit) -> int:
+    """Samples to simulate before the gate's opening so that an echo arriving near it is seen
+    rising: the band limit's (zero-phase) response starts ``band.half_width`` samples before
+    the optical pulse, and a comparator needs an upward crossing. 0 when the first echo
+    arrives later than that (the gate's own samples suffice; stops before the opening are not
+    recorded either way)."""
+    need = (band.half_width + 8) * dt_s - (first_arrival_s - t_lo_s)
+    return max(0, math.ceil(need / dt_s)) if math.isfinite(need) else 0
+
+
 def montecarlo_gate(
     rng: np.random.Generator,
     *,
@@ -327,6 +337,8 @@ def montecarlo_gate(
     lit_of_pixel = np.full(n_pixels_total, -1, dtype=np.int64)
     lit_of_pixel[pixel] = np.arange(len(pixel))
     has = weights > 0
+    lead = lead_samples(np.where(has, arrivals, np.inf).min(initial=np.inf), t_lo, dt_s, band)
+    t_lo, n_samples = t_lo - lead * dt_s, n_samples + lead
     tau = shape.tau_s
     window_lo = np.where(has, arrivals, np.inf).min(axis=1, initial=np.inf) - tau
     window_hi = np.where(has, arrivals, -np.inf).max(axis=1, initial=-np.inf) + 2.0 * tau

@@ -64,6 +64,7 @@ SPECS: dict[str, ControlSpec] = {
     "gm_dark_count_rate_hz": ControlSpec("Dark count rate", "Hz", 1.0, 1e8, 1.0, log_slider=True),
     "gm_dead_time_ns": ControlSpec("Dead time", "ns", 1.0, 1e5, 1.0, log_slider=True),
     "gm_pulses": ControlSpec("Pulses per frame", "", 1, 1000, 1, integer=True),
+    "gm_attenuation_db": ControlSpec("Transmit attenuation", "dB", 0.0, 100.0, 1.0),
 }
 
 
@@ -93,6 +94,7 @@ class Controls:
     gm_dark_count_rate_hz: float = 1e4
     gm_dead_time_ns: float = 1000.0
     gm_pulses: int = 100
+    gm_attenuation_db: float = 50.0
 
     def as_state(self) -> dict[str, Any]:
         """The trame state entries of these controls."""
@@ -133,6 +135,7 @@ def controls_from_scene(
         "gm_dark_count_rate_hz": scene.gm.dark_count_rate_hz,
         "gm_dead_time_ns": scene.gm.dead_time_s * 1e9,
         "gm_pulses": scene.gm.pulses,
+        "gm_attenuation_db": scene.gm.attenuation_db,
     }
     return sanitize_controls(raw, Controls(materials=dict(part_materials)))
 

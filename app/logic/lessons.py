@@ -453,7 +453,12 @@ LESSONS: tuple[Lesson, ...] = (
     Lesson(
         key="lm-vs-gm",
         title="Linear mode against Geiger mode: a few photons, far away",
-        settings={"receiver.kind": "gm_apd", "distance_m": 3000.0, "pulse_energy_j": 0.05 * MJ},
+        settings={
+            "receiver.kind": "gm_apd",
+            "distance_m": 3000.0,
+            "pulse_energy_j": 0.05 * MJ,
+            "gm.attenuation_db": 0.0,
+        },
         selection=((137, 111),),
         look=(
             "A Geiger-mode array at {d:,.0f} m with a {energy_mj:g} mJ pulse: {gm_pts} of the "

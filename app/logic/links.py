@@ -36,6 +36,7 @@ LINK_NAMES = {key: (key, 1.0) for key in SPECS} | {
     "gm_dark_count_rate_hz": ("gm.dark_count_rate_hz", 1.0),
     "gm_dead_time_ns": ("gm.dead_time_s", 1e-9),
     "gm_pulses": ("gm.pulses", 1.0),
+    "gm_attenuation_db": ("gm.attenuation_db", 1.0),
 }
 CONTROL_OF = {name: (key, factor) for key, (name, factor) in LINK_NAMES.items()}
 # link name -> control

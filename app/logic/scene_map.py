@@ -28,6 +28,7 @@ def scene_overrides(controls: Controls) -> dict[str, object]:
         "gm.dark_count_rate_hz": float(controls.gm_dark_count_rate_hz),
         "gm.dead_time_s": float(controls.gm_dead_time_ns) * 1e-9,
         "gm.pulses": int(controls.gm_pulses),
+        "gm.attenuation_db": float(controls.gm_attenuation_db),
     }
 
 

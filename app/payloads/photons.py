@@ -11,7 +11,7 @@ import numpy as np
 import simcore
 from app.payloads.charts import base_layout, note
 from app.payloads.style import SELECTION_COLORS
-from simcore.receivers.gm_apd import photon_energy_j
+from simcore.receivers.gm_apd import frame_pulse_energy_j, photon_energy_j
 
 MARGIN_BINS = 12  # bins shown either side of the echo's waveform
 NO_ECHO_BINS = 80  # bins shown around the busiest bin of a pixel without an echo
@@ -96,5 +96,7 @@ def _expected_counts(result: simcore.Result, w, flat: int, k: np.ndarray) -> np.
     gm = scene.gm
     t = rx.gate_start_s + (k + 0.5) * gm.bin_s
     echo_w = np.interp(t, w.t_s, w.power_w, left=0.0, right=0.0) if len(w.t_s) else 0.0 * t
+    # the waveform is the laser pulse's; the frame's pulses carry it less the attenuation
+    echo_w = echo_w * frame_pulse_energy_j(scene) / scene.laser.pulse_energy_j
     rate_hz = gm.pde * echo_w / photon_energy_j(scene.laser.wavelength_m) + rx.rate_hz[flat]
     return gm.pulses * gm.bin_s * rate_hz

@@ -331,12 +331,20 @@ def receiver_choice() -> None:
         div_classes="control control-receiver_kind",
     )
     with html.Div(v_show="receiver_kind === 'gm_apd'", classes="gm-controls"):
-        for key in ("gm_pde", "gm_dark_count_rate_hz", "gm_dead_time_ns", "gm_pulses"):
+        for key in (
+            "gm_pde",
+            "gm_dark_count_rate_hz",
+            "gm_dead_time_ns",
+            "gm_pulses",
+            "gm_attenuation_db",
+        ):
             slider(key)
         html.Div(
             "Each pixel counts single photons over the pulses (dead time re-armed at each gate); "
             "click a pixel to see its histogram against the counts expected without dead time. "
-            "TNR sets the count threshold's false-alarm rate.",
+            "TNR sets the count threshold's false-alarm rate. The transmit attenuation keeps the "
+            "pixels photon-starved (under one photoelectron a pulse): brighter echoes pile up "
+            "and range early.",
             classes="text-caption hint",
         )
 

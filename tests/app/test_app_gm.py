@@ -40,13 +40,14 @@ def test_the_geiger_mode_switch_and_its_parameters_reach_the_scene(app):
 
 
 def test_the_chart_shows_the_pixels_histogram_and_the_expected_counts(app):
-    # about one echo photoelectron per pulse: 10 uJ, PDE 0.01, 5 km
+    # about one echo photoelectron per pulse: 10 uJ unattenuated, PDE 0.01, 5 km
     change(
         app,
         receiver_kind="gm_apd",
         gm_pulses=50,
         gm_pde=0.01,
         pulse_energy_mj=0.01,
+        gm_attenuation_db=0.0,
         distance_m=5000,
     )
     result = app.logic.last_frame.result

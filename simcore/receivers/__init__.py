@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import importlib
 from collections.abc import Callable
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -169,7 +169,37 @@ def stage_receiver(scene: Scene, echo: EchoStage, background: Background) -> Res
 
 
 def stage_detection(scene: Scene, echo: EchoStage, response: Response) -> Detection:
-    return _readonly_arrays(get(scene.receiver.kind).detect(scene, echo, response))
+    detection = get(scene.receiver.kind).detect(scene, echo, response)
+    return _readonly_arrays(outside_the_gate(scene, detection))
+
+
+def gate_m(scene: Scene) -> tuple[float, float]:
+    """The range gate [R_st - R_gate / 2, R_st + R_gate / 2], clipped at 0 [m]."""
+    half = 0.5 * scene.timing.range_gate_m
+    return max(0.0, scene.gate_center_m - half), scene.gate_center_m + half
+
+
+def outside_the_gate(scene: Scene, detection: Detection) -> Detection:
+    """``detection`` with P_d = 0 for every lit pixel whose noise-free range lies outside the
+    range gate (its echo cannot give a point, whatever its SNR), and a summary warning (one
+    line under ``warnings``) saying how many and where the target is. Unchanged if none."""
+    lo, hi = gate_m(scene)
+    r = np.asarray(detection.range_true_m)
+    out = (r < lo) | (r > hi)
+    if not out.any():
+        return detection
+    figures = dict(detection.summary_figures)
+    figures["warnings"] = [
+        *figures.get("warnings", []),
+        f"{int(out.sum())} of {len(r)} lit pixels see the target at {np.min(r[out]):.4g}-"
+        f"{np.max(r[out]):.4g} m, outside the range gate [{lo:.4g}, {hi:.4g}] m: no point "
+        "from them (P_d 0); move timing.gate_center_m or lengthen timing.range_gate_m",
+    ]
+    return replace(
+        detection,
+        p_detect=np.where(out, 0.0, detection.p_detect),
+        summary_figures=figures,
+    )
 
 
 def _readonly_arrays(record):

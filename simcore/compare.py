@@ -5,7 +5,9 @@ Per (receiver, distance, pulse energy): target points, the range error of the de
 (measured less the noise-free range: its rms, its median, the bias, and its sd about the mean,
 the noise; for the Geiger-mode array the noise-free range is the echo's energy-weighted one, so a
 piled-up histogram's bias shows as bias, not noise, beside the receiver's predicted bias and
-sd), outliers, and the pulses needed for a detection
+sd), the false points of the frame's cloud (``n_outliers``) beside their prediction
+(``n_false_points_expected``, the same basis for both receivers: points in the cloud per frame;
+docs/physics.md#false-points), and the pulses needed for a detection
 probability ``p_target`` in the median lit pixel: for the LM-APD, independent flashes with its
 per-flash P_d (Eq. 27) until one detects, ceil(ln(1 - P) / ln(1 - P_d)); for the Geiger-mode
 array, the least frame length N whose P_d (counts of N pulses against the threshold) reaches P.
@@ -40,6 +42,7 @@ class Row:
     predicted_bias_m: float
     predicted_sd_m: float
     n_outliers: int
+    n_false_points_expected: float
     pulses_needed: float
     signal_pe_median: float
 
@@ -103,6 +106,7 @@ def compare(
                         ),
                         predicted_sd_m=_figure(s, "gm.range_sigma_m", s["range_sigma_m_median"]),
                         n_outliers=s["n_outliers"],
+                        n_false_points_expected=float(s.get("n_false_points_expected", math.nan)),
                         pulses_needed=pulses_needed(scene, res, p_target),
                         signal_pe_median=float(np.median(pe))
                         if pe is not None and len(pe)

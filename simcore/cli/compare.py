@@ -48,7 +48,7 @@ def run_cli(args: argparse.Namespace) -> int:
     say(
         f"{'receiver':8} {'distance_m':>10} {'energy_j':>9} {'pe':>9} {'points':>6} "
         f"{'rms_m':>8} {'bias_m':>8} {'sd_m':>8} {'pred_b_m':>8} {'pred_sd_m':>9} "
-        f"{'outl':>5} {'pulses':>6}"
+        f"{'outl':>5} {'outl_exp':>8} {'pulses':>6}"
     )
 
     def line(r) -> None:
@@ -56,7 +56,8 @@ def run_cli(args: argparse.Namespace) -> int:
             f"{r.receiver:8} {r.distance_m:10.0f} {r.pulse_energy_j:9.1e} "
             f"{r.signal_pe_median:9.3g} {r.n_points:6d} {r.range_noise_m:8.3g} "
             f"{r.range_bias_m:8.3g} {r.range_sd_m:8.3g} {r.predicted_bias_m:8.3g} "
-            f"{r.predicted_sd_m:9.3g} {r.n_outliers:5d} {r.pulses_needed:6g}"
+            f"{r.predicted_sd_m:9.3g} {r.n_outliers:5d} {r.n_false_points_expected:8.3g} "
+            f"{r.pulses_needed:6g}"
         )
 
     rows = compare(scene, p_target=args.p_detect, progress=line)
@@ -76,8 +77,8 @@ def run_cli(args: argparse.Namespace) -> int:
 
 def draw(rows, path: Path, p_target: float) -> None:
     """Five panels against distance: points, range bias (|median error|), range noise (sd
-    about the mean), outliers, pulses for ``p_target``; one line per receiver and pulse
-    energy."""
+    about the mean), false points (outliers, and dotted their prediction), pulses for
+    ``p_target``; one line per receiver and pulse energy."""
     import matplotlib  # noqa: PLC0415
 
     matplotlib.use("Agg")
@@ -88,7 +89,7 @@ def draw(rows, path: Path, p_target: float) -> None:
         ("n_points", "target points"),
         ("range_bias_m", "range bias, |median error| [m]"),
         ("range_sd_m", "range noise, sd [m]"),
-        ("n_outliers", "outliers"),
+        ("n_outliers", "false points per frame (dotted: expected)"),
         ("pulses_needed", f"pulses for P_d = {p_target:g}"),
     )
     styles = {"lm_apd": "-o", "gm_apd": "--s"}
@@ -100,7 +101,10 @@ def draw(rows, path: Path, p_target: float) -> None:
                 y = [getattr(r, field) for r in sel]
                 y = [abs(v) for v in y] if field == "range_bias_m" else y
                 y = [v if math.isfinite(v) else float("nan") for v in y]
-                ax.plot(x, y, styles[kind], label=f"{kind}, {e:g} J")
+                line = ax.plot(x, y, styles[kind], label=f"{kind}, {e:g} J")[0]
+                if field == "n_outliers":  # the prediction on the same basis, beside it
+                    expected = [r.n_false_points_expected for r in sel]
+                    ax.plot(x, expected, ":", color=line.get_color())
         ax.set_xscale("log")
         if field in ("range_bias_m", "range_sd_m", "pulses_needed"):
             ax.set_yscale("log")

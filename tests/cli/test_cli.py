@@ -157,5 +157,7 @@ def test_compare_runs_both_receivers_and_writes_its_table_and_figure(tmp_path):
     assert main(["compare", "--quick", "--set", "pixels=16", "--out", str(tmp_path)]) == 0
     rows = json.loads((tmp_path / "compare.json").read_text())
     assert {r["receiver"] for r in rows} == {"lm_apd", "gm_apd"} and len(rows) == 20
+    # both receivers' false points on one basis: the cloud's, observed and expected per frame
+    assert all(r["n_false_points_expected"] >= 0 and r["n_outliers"] >= 0 for r in rows)
     assert (tmp_path / "compare.png").stat().st_size > 10_000
     assert main(["compare", "--p-detect", "1.5", "--out", str(tmp_path)]) == 2

@@ -184,3 +184,26 @@ def test_geiger_mode_false_points_per_frame_follow_the_scan_statistic(overrides)
     mean = float(np.mean(expected))
     tol = 4.0 * np.sqrt(mean / GM_FRAMES) + 0.2 * mean
     assert np.mean(observed) == pytest.approx(mean, abs=tol)
+
+
+def test_the_monte_carlos_false_points_follow_the_same_prediction():
+    """The waveform Monte Carlo's frames (noise crossings of simulated currents, the
+    discriminator's own stops) against the statistical arithmetic it reports."""
+    observed, expected = [], []
+    frames = 3
+    for seed in range(frames):
+        scene = simcore.with_overrides(
+            simcore.Scene(),
+            {
+                "pixels": 32,
+                "seed": seed,
+                "fidelity.noise_model": "montecarlo",
+                "timing.tnr": 3.0,
+                "timing.range_gate_m": 200.0,
+            },
+        )
+        s = PIPE.run(scene).summary()
+        observed.append(s["n_outliers"])
+        expected.append(s["n_false_points_expected"])
+    mean = float(np.mean(expected))
+    assert np.mean(observed) == pytest.approx(mean, abs=4.0 * np.sqrt(mean / frames))

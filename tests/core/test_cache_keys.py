@@ -125,6 +125,8 @@ ALTERNATIVES = {
     "gm.crosstalk": (0.2, GM),
     "gm.afterpulsing": (0.3, GM_SHORT_DEAD),
     "gm.coates": (False, GM),
+    "gm.attenuation_db": (20.0, GM),
+    "gm.pileup_correction": ("fit", {**GM, "gm.attenuation_db": 10.0}),
     "quality.tau_m": (0.002, {}),  # the ground-truth outlier flag of points 2 mm off
 }
 # keys whose change leaves this scene's arrays as they were, and why

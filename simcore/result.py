@@ -188,6 +188,7 @@ class Result:
             "n_dropped": n_lit - n_target_points,
             "n_unlit": n_hit - n_lit,
             "p_detect_mean": _stat(d.p_detect, np.mean),
+            "p_detect_min": _stat(d.p_detect, np.min),  # the weakest lit pixel's
             "snr_median": _stat(r.snr, np.median),
             "range_sigma_m_median": _stat(finite_sigma, np.median),
             "n_false_expected": (

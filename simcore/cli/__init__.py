@@ -12,6 +12,7 @@
                     [--duration-s SECONDS] [--j2]
     lmapd reproduce --out DIR [--quick] [--seed N]
     lmapd sweep SWEEP.toml --out DIR [--scheduler ADDRESS] [--workers N]
+    lmapd design STUDY.toml --out DIR [--trials N] [--workers N | --scheduler ADDRESS] [--resume]
     lmapd compare [SCENE.toml] [--set NAME=VALUE ...] --out DIR [--quick] [--p-detect 0.95]
 
 One module per subcommand (``add_parser`` registers it, ``run_cli`` runs it), ``common`` for what
@@ -30,6 +31,7 @@ from . import (
     app,
     bench,
     compare,
+    design,
     flyaround,
     keys,
     reproduce,
@@ -53,6 +55,7 @@ SUBCOMMANDS = (
     flyaround,
     reproduce,
     sweep,
+    design,
     compare,
 )
 # commands after which the process ends without the interpreter's teardown (unloading numpy,

@@ -1,0 +1,370 @@
+"""What a study writes: every trial at every envelope point (Parquet), the feasible front (CSV),
+the winning design as scenes (TOML), figures (PNG) and a report in words (Markdown)."""
+
+from __future__ import annotations
+
+import csv
+import io as _io
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from .. import io
+from ..scene import dump_scene
+from .search import Record
+from .study import Study
+
+TRIALS_NAME = "trials.parquet"
+FRONT_NAME = "front.csv"
+BEST_NAME = "best.toml"
+BEST_DIR = "best"
+REPORT_NAME = "report.md"
+FIGURES = ("front.png", "margins.png", "effects.png")
+
+
+def _fmt(x: float) -> str:
+    return "n/a" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.4g}"
+
+
+def trials_table(study: Study, records: Sequence[Record]):
+    """One row per record and envelope point: stage, design, envelope keys, every figure."""
+    import pyarrow as pa  # noqa: PLC0415
+
+    rows = []
+    for rec in records:
+        points = rec.points or [{"error": rec.error}]
+        for p, figures in enumerate(points):
+            row: dict[str, Any] = {
+                "record": rec.number,
+                "stage": rec.stage,
+                "of": rec.of,
+                "preset": rec.preset,
+                "point": p,
+                "feasible": rec.feasible,
+                "error": figures.get("error"),
+            }
+            row |= {f"var.{k}": v for k, v in rec.params.items()}
+            env = study.envelope[p] if p < len(study.envelope) else {}
+            row |= {f"env.{k}": v for k, v in env.items()}
+            row |= {
+                f"objective.{n}": v for n, v in zip(study.minimize, rec.objectives, strict=True)
+            }
+            row |= {k: v for k, v in figures.items() if k != "error"}
+            rows.append(row)
+    names: dict[str, None] = {}
+    for row in rows:
+        names.update(dict.fromkeys(row))
+    columns = {}
+    for name in names:
+        values = [row.get(name) for row in rows]
+        kinds = {type(v) for v in values if v is not None}
+        if kinds <= {int, float} and kinds:
+            values = [float(v) if v is not None else None for v in values]
+        elif kinds and not kinds <= {bool}:
+            values = [None if v is None else str(v) for v in values]
+        columns[name] = pa.array(values)
+    return pa.table(columns)
+
+
+def front_rows(study: Study, front: Sequence[Record], confirmed: Sequence[Record]):
+    """The front as CSV rows: the design, its costs, each requirement's value and margin, and
+    its confirmation (feasible at the confirmation preset, or empty if not confirmed)."""
+    by_of = {r.of: r for r in confirmed}
+    rows = []
+    for rec in front:
+        row: dict[str, Any] = {"record": rec.number, "stage": rec.stage}
+        row |= dict(rec.params)
+        row |= dict(zip(study.minimize, rec.objectives, strict=True))
+        for req, value, margin in zip(study.requirements, rec.values, rec.margins, strict=True):
+            row[req.text()] = value
+            row[f"margin: {req.text()}"] = margin
+        conf = by_of.get(rec.number)
+        row["confirmed_feasible"] = "" if conf is None else conf.feasible
+        rows.append(row)
+    return rows
+
+
+def write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
+    names: dict[str, None] = {}
+    for row in rows:
+        names.update(dict.fromkeys(row))
+    buf = _io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(names) or ["record"])
+    writer.writeheader()
+    writer.writerows(rows)
+    with io.atomic_path(path) as tmp:
+        Path(tmp).write_text(buf.getvalue())
+
+
+def worst_point(study: Study, rec: Record, i: int) -> int:
+    """The envelope point where requirement ``i`` is met least."""
+    req = study.requirements[i]
+    best, where = math.inf, 0
+    for p, figures in enumerate(rec.points):
+        value = figures.get(req.figure, math.nan) if "error" not in figures else math.nan
+        m = req.margin(value)
+        if m < best:
+            best, where = m, p
+    return where
+
+
+def write_best(study: Study, rec: Record, out: Path) -> list[Path]:
+    """The design as a scene at each envelope point (``best/point_NN.toml``) and, as
+    ``best.toml``, at the point where its binding requirement is met least."""
+    written = []
+    folder = out / BEST_DIR
+    folder.mkdir(parents=True, exist_ok=True)
+    for p in range(len(study.envelope)):
+        path = folder / f"point_{p:02d}.toml"
+        text = dump_scene(study.scene(rec.params, p, rec.preset))
+        with io.atomic_path(path) as tmp:
+            Path(tmp).write_text(text)
+        written.append(path)
+    binding = min(range(len(rec.margins)), key=lambda i: rec.margins[i]) if rec.margins else 0
+    point = worst_point(study, rec, binding) if rec.margins else 0
+    with io.atomic_path(out / BEST_NAME) as tmp:
+        Path(tmp).write_text(
+            f"# {study.name}: the winning design at envelope point {point} "
+            f"({study.envelope[point]}), where it meets its requirements least\n"
+            + dump_scene(study.scene(rec.params, point, rec.preset))
+        )
+    return [out / BEST_NAME, *written]
+
+
+def write_figures(study: Study, records: Sequence[Record], front, winner, out: Path) -> list[Path]:
+    """front.png (the costs of every screened design, the front marked), margins.png (the
+    winner's margin for each requirement at each envelope point), effects.png (each variable
+    against the first cost, feasible designs filled)."""
+    import matplotlib  # noqa: PLC0415
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # noqa: PLC0415
+
+    screened = [r for r in records if r.stage in ("screen", "polish")]
+    ok = [r for r in screened if r.feasible]
+    bad = [r for r in screened if not r.feasible and all(math.isfinite(x) for x in r.objectives)]
+    paths = []
+    fig, ax = plt.subplots(figsize=(6.4, 4.4))
+    if len(study.minimize) >= 2:
+        x, y = study.minimize[0], study.minimize[1]
+        ax.scatter(
+            [r.objectives[0] for r in bad],
+            [r.objectives[1] for r in bad],
+            s=12,
+            c="0.7",
+            label="fails a requirement",
+        )
+        ax.scatter(
+            [r.objectives[0] for r in ok],
+            [r.objectives[1] for r in ok],
+            s=16,
+            c="tab:blue",
+            label="feasible",
+        )
+        f = sorted(front, key=lambda r: r.objectives[0])
+        ax.plot(
+            [r.objectives[0] for r in f],
+            [r.objectives[1] for r in f],
+            "o-",
+            c="tab:red",
+            label="front",
+        )
+        ax.set_xlabel(x)
+        ax.set_ylabel(y)
+    else:
+        x = study.minimize[0]
+        ax.scatter(
+            [r.number for r in bad],
+            [r.objectives[0] for r in bad],
+            s=12,
+            c="0.7",
+            label="fails a requirement",
+        )
+        ax.scatter(
+            [r.number for r in ok],
+            [r.objectives[0] for r in ok],
+            s=16,
+            c="tab:blue",
+            label="feasible",
+        )
+        if winner is not None:
+            ax.axhline(
+                winner.objectives[0], c="tab:red", lw=1, label=f"winner {winner.objectives[0]:.4g}"
+            )
+        ax.set_xlabel("design (order run)")
+        ax.set_ylabel(x)
+    if any(v > 0 for r in screened for v in r.objectives[:2] if math.isfinite(v)):
+        ax.set_yscale("log") if len(study.minimize) == 1 else None
+    ax.set_title(f"{study.name}: {len(screened)} designs screened ({study.preset})")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    paths.append(_save(fig, out / "front.png"))
+    plt.close(fig)
+
+    fig, ax = plt.subplots(figsize=(6.4, 0.6 + 0.5 * max(1, len(study.requirements))))
+    if winner is not None and study.requirements:
+        n_points = len(study.envelope)
+        for i, req in enumerate(study.requirements):
+            margins = []
+            for figures in winner.points:
+                value = figures.get(req.figure, math.nan) if "error" not in figures else math.nan
+                margins.append(req.margin(value) / max(abs(req.bound), 1e-12))
+            ys = [i + (p - (n_points - 1) / 2) * 0.6 / max(n_points, 1) for p in range(n_points)]
+            ax.barh(
+                ys,
+                margins,
+                height=0.6 / max(n_points, 1),
+                color=["tab:red" if m < 0 else "tab:green" for m in margins],
+            )
+        ax.axvline(0, c="k", lw=0.8)
+        ax.set_yticks(
+            range(len(study.requirements)), [r.text() for r in study.requirements], fontsize=8
+        )
+        ax.set_xlabel("margin over the bound, relative (one bar per envelope point)")
+        ax.set_title("The winning design's margins")
+    else:
+        ax.text(0.5, 0.5, "no feasible design", ha="center", va="center")
+    fig.tight_layout()
+    paths.append(_save(fig, out / "margins.png"))
+    plt.close(fig)
+
+    n = len(study.variables)
+    fig, axes = plt.subplots(1, n, figsize=(3.2 * n, 3.0), squeeze=False)
+    for ax, var in zip(axes[0], study.variables, strict=True):
+        for group, style in ((bad, {"c": "0.7", "s": 10}), (ok, {"c": "tab:blue", "s": 14})):
+            xs = [r.params.get(var.key) for r in group]
+            if xs and all(isinstance(v, (int, float)) for v in xs):
+                ax.scatter(xs, [r.objectives[0] for r in group], **style)
+            elif xs:
+                ax.scatter([str(v) for v in xs], [r.objectives[0] for r in group], **style)
+        if var.log:
+            ax.set_xscale("log")
+        ax.set_xlabel(var.key, fontsize=8)
+        ax.set_ylabel(study.minimize[0], fontsize=8)
+    fig.suptitle("Each variable against the first cost (blue: feasible)", fontsize=9)
+    fig.tight_layout()
+    paths.append(_save(fig, out / "effects.png"))
+    plt.close(fig)
+    return paths
+
+
+def _save(fig, path: Path) -> Path:
+    with io.atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    return path
+
+
+def report_text(study, records, front, winner, confirmed, tally, wall_s: float) -> str:
+    """The study's outcome in words: the winner and by how much each requirement is met at its
+    worst envelope point, the binding requirement; or, if no design is feasible, which
+    requirement fails at the best trial and by how much."""
+    screened = [r for r in records if r.stage == "screen"]
+    lines = [
+        f"# Design study: {study.name}",
+        "",
+        f"{len(screened)} designs screened at the {study.preset} preset over "
+        f"{len(study.envelope)} envelope points, {sum(r.feasible for r in screened)} feasible; "
+        f"{len([r for r in records if r.stage == 'polish'])} polish evaluations; "
+        f"{len(confirmed)} confirmed at the {study.confirm_preset} preset; "
+        f"wall time {wall_s:.0f} s.",
+        "",
+        "Requirements: " + "; ".join(r.text() for r in study.requirements) + ".",
+        "Minimised: " + ", ".join(study.minimize) + ".",
+        "",
+    ]
+    if winner is None and confirmed:
+        lines += [
+            "## No design is confirmed",
+            "",
+            f"{sum(r.feasible for r in records if r.stage != 'confirm')} designs met every "
+            f"requirement at the {study.preset} preset; none of the {len(confirmed)} confirmed "
+            f"at the {study.confirm_preset} preset did:",
+        ]
+        for c in confirmed:
+            fails = "; ".join(
+                f"{r.text()} at {_fmt(v)} ({_fmt(-m)} short)"
+                for r, v, m in zip(study.requirements, c.values, c.margins, strict=True)
+                if m < 0
+            )
+            lines.append(f"- design {c.of} ({_params(c)}): {fails or c.error}")
+        lines.append("")
+        return "\n".join(lines)
+    if winner is None:
+        worst = min(
+            (r for r in records if r.stage != "confirm"),
+            key=lambda r: (r.error is not None, r.violation, r.number),
+            default=None,
+        )
+        lines += ["## No design meets every requirement", ""]
+        if worst is not None:
+            lines.append(f"Closest: design {worst.number} ({_params(worst)}).")
+            for i, (req, value, margin) in enumerate(
+                zip(study.requirements, worst.values, worst.margins, strict=True)
+            ):
+                if margin < 0:
+                    p = worst_point(study, worst, i)
+                    lines.append(
+                        f"- **{req.text()}** fails: {_fmt(value)} ({_fmt(-margin)} short), worst "
+                        f"at envelope point {p} ({study.envelope[p]})."
+                    )
+            if worst.error:
+                lines.append(f"- its evaluation failed: {worst.error}")
+        lines.append("")
+        return "\n".join(lines)
+    cost = ", ".join(
+        f"{n} = {_fmt(v)}" for n, v in zip(study.minimize, winner.objectives, strict=True)
+    )
+    lines += [
+        "## The winner",
+        "",
+        f"Design {winner.number} ({winner.stage}, {winner.preset} preset): {_params(winner)}.",
+        f"Cost: {cost}.",
+        "",
+        "| requirement | value over the envelope | margin | worst envelope point |",
+        "|---|---|---|---|",
+    ]
+    for i, (req, value, margin) in enumerate(
+        zip(study.requirements, winner.values, winner.margins, strict=True)
+    ):
+        p = worst_point(study, winner, i)
+        lines.append(
+            f"| {req.text()} | {_fmt(value)} | {_fmt(margin)} | {p}: {study.envelope[p]} |"
+        )
+    if study.requirements:
+        rel = [
+            m / max(abs(r.bound), 1e-12)
+            for r, m in zip(study.requirements, winner.margins, strict=True)
+        ]
+        binding = min(range(len(rel)), key=lambda i: rel[i])
+        lines += [
+            "",
+            f"The binding requirement is **{study.requirements[binding].text()}** "
+            f"(met by {100 * rel[binding]:.1f} % of its bound).",
+        ]
+    if len(front) > 1:
+        lines += ["", f"The feasible front holds {len(front)} designs (`front.csv`, `front.png`)."]
+    if confirmed:
+        lines += ["", "## Confirmation at the reference preset", ""]
+        for c in confirmed:
+            state = (
+                "meets every requirement"
+                if c.feasible
+                else "FAILS: "
+                + "; ".join(
+                    f"{r.text()} at {_fmt(v)}"
+                    for r, v, m in zip(study.requirements, c.values, c.margins, strict=True)
+                    if m < 0
+                )
+            )
+            lines.append(
+                f"- design {c.of} at {c.preset}: {state}" + (f" ({c.error})" if c.error else "")
+            )
+    lines += ["", "## The staged cache", "", tally.line() + ".", ""]
+    return "\n".join(lines)
+
+
+def _params(rec: Record) -> str:
+    return ", ".join(
+        f"{k} = {_fmt(v) if isinstance(v, float) else v}" for k, v in rec.params.items()
+    )

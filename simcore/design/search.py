@@ -1,0 +1,382 @@
+"""The search: optuna proposes designs (seeded; TPE with constraints for one objective, NSGA-II
+for several), each evaluated over the envelope at the screening preset; the cheapest feasible
+design polished along its cost variables; the front confirmed at the confirmation preset.
+
+Every evaluated design is a record written to ``DIR/records/`` as soon as it is finished, so an
+interrupted study keeps every finished trial; ``resume`` replays them into a new optuna study
+(and reuses any polish or confirmation already done) and goes on to the number of trials asked.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from .. import io
+from ..scene import SceneError
+from .evaluate import Evaluator, PointOutcome, StageTally
+from .study import Study, Variable
+
+RECORDS_DIR = "records"
+STAGES = ("screen", "polish", "confirm")
+DERIVED_FROM = {  # the scene key a derived cost figure grows with
+    "receive.aperture_area_m2": "receive.aperture_diameter_m",
+    "detector.pixel_count": "detector.pixels",
+    "laser.pulse_energy_total_j": "laser.pulse_energy_j",
+}
+
+
+@dataclass
+class Record:
+    """One design evaluated over the envelope at one preset.
+
+    number : its order in the study; stage : "screen", "polish" or "confirm"; of : the screened
+    record a confirmation confirms (-1 otherwise); points : per envelope point, its figures or
+    {"error": text}; values : each requirement's aggregate over the envelope; margins : how far
+    each is met (negative: fails); objectives : the costs, in ``minimize`` order.
+    """
+
+    number: int
+    stage: str
+    preset: str
+    params: dict[str, Any]
+    points: list[dict[str, Any]]
+    values: list[float]
+    margins: list[float]
+    objectives: list[float]
+    feasible: bool
+    error: str | None = None
+    frame_s: float = 0.0
+    of: int = -1
+
+    @property
+    def violation(self) -> float:
+        """The sum of the shortfalls, each relative to its bound (0: feasible)."""
+        return sum(max(0.0, -m) for m in self.margins)
+
+    def to_json(self) -> dict[str, Any]:
+        return dict(self.__dict__)
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> Record:
+        return cls(**{k: data[k] for k in cls.__dataclass_fields__ if k in data})
+
+
+@dataclass
+class SearchState:
+    """What the search has done: every record, and the stage tally of this run."""
+
+    records: list[Record] = field(default_factory=list)
+    tally: StageTally = field(default_factory=StageTally)
+    n_run: int = 0
+    n_reused: int = 0
+    next_number: int = 0  # records are numbered in the order they were run, across resumes
+
+
+def _key(preset: str, params: Mapping[str, Any]) -> str:
+    return preset + " " + json.dumps(params, sort_keys=True)
+
+
+def load_records(out: Path) -> list[Record]:
+    folder = out / RECORDS_DIR
+    if not folder.is_dir():
+        return []
+    records = []
+    for path in sorted(folder.glob("*.json")):
+        try:
+            records.append(Record.from_json(json.loads(path.read_text())))
+        except (OSError, ValueError, TypeError):
+            continue  # a record cut short by a kill: its design runs again
+    return records
+
+
+def _write(out: Path, rec: Record) -> None:
+    (out / RECORDS_DIR).mkdir(parents=True, exist_ok=True)
+    io.write_json(out / RECORDS_DIR / f"{rec.stage}_{rec.number:05d}.json", rec.to_json())
+
+
+def evaluate_designs(
+    study: Study,
+    designs: Sequence[Mapping[str, Any]],
+    preset: str,
+    stage: str,
+    evaluator: Evaluator,
+    state: SearchState,
+    out: Path,
+    cache: dict[str, Record],
+    of: Sequence[int] | None = None,
+) -> list[Record]:
+    """Each design over the whole envelope at ``preset``; records written as each finishes
+    (those already in ``cache``, from a previous run, are taken as they are)."""
+    done: dict[int, Record] = {}
+    jobs, scenes_ok = [], {}
+    for i, params in enumerate(designs):
+        hit = cache.get(_key(preset, params))
+        if hit is not None:
+            done[i] = hit
+            state.n_reused += 1
+            continue
+        scenes, error = [], None
+        for p in range(len(study.envelope)):
+            try:
+                scenes.append(study.scene(params, p, preset))
+            except SceneError as exc:
+                error = f"SceneError: {exc}"
+                break
+        if error is not None:
+            done[i] = _record(study, -1, stage, preset, params, [], error)
+            continue
+        scenes_ok[i] = scenes
+        jobs += [(i, scene, p) for p, scene in enumerate(scenes)]
+    outcomes: dict[int, dict[int, PointOutcome]] = {i: {} for i in scenes_ok}
+    for i, point, outcome in evaluator.evaluate(jobs):
+        state.tally.add(outcome)
+        outcomes[i][point] = outcome
+    for i in scenes_ok:
+        points = [outcomes[i][p] for p in range(len(study.envelope))]
+        done[i] = _record(study, 0, stage, preset, designs[i], points, None)
+    records = []
+    for i in range(len(designs)):
+        rec = done[i]
+        if _key(preset, rec.params) not in cache:
+            rec.number = state.next_number
+            state.next_number += 1
+            rec.of = of[i] if of is not None else -1
+            state.records.append(rec)
+            state.n_run += 1
+            cache[_key(preset, rec.params)] = rec
+            _write(out, rec)
+        elif rec not in state.records:
+            state.records.append(rec)
+        records.append(rec)
+    return records
+
+
+def _record(study, number, stage, preset, params, points: Sequence[PointOutcome], error):
+    figures = []
+    for o in points:
+        if o.error is not None:
+            error = error or o.error
+            figures.append({"error": o.error})
+        else:
+            figures.append(dict(o.figures or {}))
+    values, margins = [], []
+    for req in study.requirements:
+        per_point = [f.get(req.figure, math.nan) if "error" not in f else math.nan for f in figures]
+        value = req.aggregate(per_point) if figures else math.nan
+        values.append(value)
+        margins.append(req.margin(value))
+    try:
+        objectives = study.objective_values(study.scene(params, 0, preset))
+    except SceneError:
+        objectives = [math.nan] * len(study.minimize)
+    feasible = error is None and all(m >= 0 for m in margins)
+    return Record(
+        number=number,
+        stage=stage,
+        preset=preset,
+        params=dict(params),
+        points=figures,
+        values=values,
+        margins=margins,
+        objectives=objectives,
+        feasible=feasible,
+        error=error,
+        frame_s=float(sum(o.frame_s for o in points if math.isfinite(o.frame_s))),
+    )
+
+
+# ----------------------------------------------------------------------------------------------
+# optuna
+# ----------------------------------------------------------------------------------------------
+def _distribution(v: Variable):
+    from optuna import distributions as d  # noqa: PLC0415  (only when a study runs)
+
+    if v.choices:
+        return d.CategoricalDistribution(list(v.choices))
+    if v.integer:
+        return d.IntDistribution(int(v.low), int(v.high), log=v.log)
+    return d.FloatDistribution(v.low, v.high, log=v.log)
+
+
+def _violations(study: Study, rec: Record) -> list[float]:
+    if rec.error is not None:
+        return [1e12] * max(1, len(study.requirements))
+    return [r.violation(v) for r, v in zip(study.requirements, rec.values, strict=True)] or [0.0]
+
+
+def make_optuna_study(study: Study, n_trials: int):
+    """An in-memory optuna study with the study's seeded, constraint-aware sampler."""
+    import optuna  # noqa: PLC0415
+
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    # the samplers read each trial's constraints (Trial.set_constraint: feasible when <= 0)
+    if len(study.minimize) > 1:
+        sampler = optuna.samplers.NSGAIISampler(
+            population_size=max(10, min(50, n_trials // 4)), seed=study.seed
+        )
+    else:
+        sampler = optuna.samplers.TPESampler(
+            seed=study.seed, n_startup_trials=max(5, min(20, n_trials // 5))
+        )
+    return optuna.create_study(directions=["minimize"] * len(study.minimize), sampler=sampler)
+
+
+def _replay(ostudy, study: Study, records: Sequence[Record], dists) -> None:
+    import optuna  # noqa: PLC0415
+
+    for rec in records:
+        ok = rec.error is None and all(math.isfinite(v) for v in rec.objectives)
+        violations = _violations(study, rec)
+        ostudy.add_trial(
+            optuna.trial.create_trial(
+                state=optuna.trial.TrialState.COMPLETE if ok else optuna.trial.TrialState.FAIL,
+                values=rec.objectives if ok else None,
+                params=rec.params,
+                distributions=dists,
+                constraints={f"c{i}": v for i, v in enumerate(violations)},
+            )
+        )
+
+
+def search(
+    study: Study,
+    n_trials: int,
+    evaluator: Evaluator,
+    state: SearchState,
+    out: Path,
+    cache: dict[str, Record],
+    previous: Sequence[Record],
+    progress: Callable[[int], None] | None = None,
+) -> list[Record]:
+    """Screen designs until ``n_trials`` screened records exist (``previous`` ones included)."""
+    import optuna  # noqa: PLC0415
+
+    dists = {v.key: _distribution(v) for v in study.variables}
+    ostudy = make_optuna_study(study, n_trials)
+    screened = [r for r in previous if r.stage == "screen"][:n_trials]
+    _replay(ostudy, study, screened, dists)
+    state.records.extend(screened)
+    for r in screened:
+        cache[_key(r.preset, r.params)] = r
+    if progress:
+        progress(len(screened))
+    per_batch = max(1, math.ceil(2 * max(evaluator.n_workers, 1) / len(study.envelope)))
+    while len(screened) < n_trials:
+        batch = [ostudy.ask(dists) for _ in range(min(per_batch, n_trials - len(screened)))]
+        designs = [dict(t.params) for t in batch]  # one already screened is not run again
+        recs = evaluate_designs(
+            study, designs, study.preset, "screen", evaluator, state, out, cache
+        )
+        for trial, rec in zip(batch, recs, strict=True):
+            ok = rec.error is None and all(math.isfinite(v) for v in rec.objectives)
+            for i, v in enumerate(_violations(study, rec)):
+                trial.set_constraint(f"c{i}", v)
+            if ok:
+                ostudy.tell(trial, rec.objectives)
+            else:
+                ostudy.tell(trial, state=optuna.trial.TrialState.FAIL)
+        screened += recs
+        if progress:
+            progress(len(recs))
+    return screened
+
+
+# ----------------------------------------------------------------------------------------------
+# polish and confirm
+# ----------------------------------------------------------------------------------------------
+def polish_variables(study: Study) -> list[Variable]:
+    """The continuous variables the (single) objective grows with: the objective itself, a cost
+    term, or what a derived cost figure is made of."""
+    if len(study.minimize) != 1:
+        return []
+    names = set(study.cost) if study.minimize[0] == "cost" else {study.minimize[0]}
+    keys = {DERIVED_FROM.get(n, n) for n in names}
+    return [v for v in study.variables if v.continuous and v.key in keys]
+
+
+def cheapest(records: Sequence[Record]) -> Record | None:
+    """The feasible record of least first objective (None if none is feasible)."""
+    ok = [r for r in records if r.feasible and r.objectives and math.isfinite(r.objectives[0])]
+    return min(ok, key=lambda r: (r.objectives[0], r.number)) if ok else None
+
+
+def polish(study: Study, best: Record, evaluator, state, out, cache) -> Record:
+    """Bisect each polish variable of the cheapest feasible design between its lower bound and
+    its value (log scale where the variable has one), the other variables held, for
+    ``polish_steps`` evaluations: feasibility is taken as monotone in a cost variable (more
+    energy, a larger aperture never hurt), so the bisection closes on the least feasible value."""
+    current = best
+    for v in polish_variables(study):
+        lo, hi = v.low, float(current.params[v.key])
+        if hi <= lo:
+            continue
+        low_design = {**current.params, v.key: lo}
+        (rec,) = evaluate_designs(
+            study, [low_design], study.preset, "polish", evaluator, state, out, cache
+        )
+        if rec.feasible:
+            current = rec
+            continue
+        for _ in range(study.polish_steps):
+            mid = math.sqrt(lo * hi) if v.log else 0.5 * (lo + hi)
+            design = {**current.params, v.key: mid}
+            (rec,) = evaluate_designs(
+                study, [design], study.preset, "polish", evaluator, state, out, cache
+            )
+            if rec.feasible:
+                hi, current = mid, rec
+            else:
+                lo = mid
+    return current
+
+
+def pareto_front(records: Sequence[Record]) -> list[Record]:
+    """The feasible records no other feasible record beats in every objective."""
+    ok = [r for r in records if r.feasible and all(math.isfinite(x) for x in r.objectives)]
+    front = []
+    for r in ok:
+        dominated = any(
+            all(a <= b for a, b in zip(o.objectives, r.objectives, strict=True))
+            and any(a < b for a, b in zip(o.objectives, r.objectives, strict=True))
+            for o in ok
+        )
+        if not dominated:
+            front.append(r)
+    unique: dict[str, Record] = {}
+    for r in sorted(front, key=lambda r: (r.objectives, r.number)):
+        unique.setdefault(json.dumps(r.params, sort_keys=True), r)
+    return list(unique.values())
+
+
+def to_confirm(study: Study, front: Sequence[Record]) -> list[Record]:
+    """Up to ``study.confirm`` front designs, the cheapest first, spread along the front."""
+    if not front or study.confirm == 0:
+        return []
+    if len(front) <= study.confirm:
+        return list(front)
+    picks = (
+        [round(i * (len(front) - 1) / (study.confirm - 1)) for i in range(study.confirm)]
+        if study.confirm > 1
+        else [0]
+    )
+    return [front[i] for i in sorted(set(picks))]
+
+
+def confirm(study: Study, chosen: Sequence[Record], evaluator, state, out, cache) -> list[Record]:
+    designs = [r.params for r in chosen]
+    return evaluate_designs(
+        study,
+        designs,
+        study.confirm_preset,
+        "confirm",
+        evaluator,
+        state,
+        out,
+        cache,
+        of=[r.number for r in chosen],
+    )

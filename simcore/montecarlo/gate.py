@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -26,6 +27,7 @@ from .discriminator import batches, discriminate, pulse_fwhm_s, raw_end_s, refer
 _THREADS = max(1, min(2, os.cpu_count() or 1))
 _DEFAULT_MAX_BYTES = 64 << 20  # working set per worker thread [bytes]
 _BYTES_PER_SAMPLE = 36  # float32 input, output, FFT buffers and masks per sample of a chunk
+PROGRESS_DELAY_S = 2.0  # a frame running longer shows a progress bar on a terminal [s]
 
 
 @dataclass(frozen=True)
@@ -380,11 +382,26 @@ def montecarlo_gate(
     parts = []
     t_wave = t_disc = 0.0
     work: Callable[[Any], Any] = lambda job: _gate_chunk(setup, *job)  # noqa: E731
-    with ThreadPoolExecutor(max_workers=max(1, min(n_threads, len(jobs)))) as pool:
-        for out, (tw, td) in pool.map(work, jobs):
+    from tqdm import tqdm  # noqa: PLC0415  (only a long frame shows it)
+
+    # a frame that runs past PROGRESS_DELAY_S shows its progress on a terminal (512 x 512 px
+    # take about a minute on two cores); piped or captured output stays silent (disable=None)
+    bar = tqdm(
+        total=n_pixels_total,
+        desc="Monte Carlo",
+        unit="px",
+        unit_scale=True,
+        file=sys.stderr,
+        disable=None,
+        delay=PROGRESS_DELAY_S,
+        leave=False,
+    )
+    with bar, ThreadPoolExecutor(max_workers=max(1, min(n_threads, len(jobs)))) as pool:
+        for (p0, p1, _), (out, (tw, td)) in zip(jobs, pool.map(work, jobs), strict=True):
             parts.append(out)
             t_wave += tw
             t_disc += td
+            bar.update(p1 - p0)
 
     t_collect = time.perf_counter()
     cat = {k: np.concatenate([p[k] for p in parts]) for k in ("pixel", "lit", "t_s", "range_m")}

@@ -5,9 +5,9 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 HOST ?= 127.0.0.1
 PORT ?= 8080
-LINT_PATHS := simcore app tests scripts assets setup.py
+LINT_PATHS := simcore app tests scripts assets docs/hooks setup.py
 
-.PHONY: app test bench soak lint format chromium clean
+.PHONY: app test bench soak lint docs format chromium clean
 
 # The first run creates .venv and installs the project and its dependencies into it (about
 # 3 minutes with a fast connection: numpy, scipy, VTK and trame are large); later runs start at once.
@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml setup.py
 	@$(PYTHON) -m venv $(VENV)
 	@echo "make: installing lmapd-sim and its dependencies into $(VENV)/ (first run: about 3 minutes)"
 	@$(BIN)/pip install --quiet --upgrade pip 'setuptools>=77'
-	$(BIN)/pip install --quiet -e '.[app,test]'
+	$(BIN)/pip install --quiet -e '.[app,test,docs]'
 	@touch $(STAMP)
 	@echo "make: environment ready"
 
@@ -46,6 +46,11 @@ lint: $(STAMP)
 	$(BIN)/ruff format --check $(LINT_PATHS)
 	$(BIN)/mypy
 
+## make docs: the documentation site (docs/, MkDocs Material) built offline into site/; a broken
+## link or a generated part that fails stops the build (--strict)
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir site
+
 format: $(STAMP)
 	$(BIN)/ruff format $(LINT_PATHS)
 
@@ -61,4 +66,4 @@ chromium:
 	fi
 
 clean:
-	rm -rf $(VENV) .pytest_cache .ruff_cache .hypothesis *.egg-info
+	rm -rf $(VENV) .pytest_cache .ruff_cache .mypy_cache .hypothesis *.egg-info site

@@ -11,7 +11,9 @@ over the repeats; they are printed, never asserted.
 
 from __future__ import annotations
 
+import datetime
 import os
+import platform
 import statistics
 import subprocess
 import sys
@@ -102,7 +104,27 @@ def peak_memory_mb(pixels: int, subrays: int) -> tuple[float, float]:
     return float(out[0]), float(out[1])
 
 
+def machine() -> dict[str, object]:
+    """What the figures were measured on: the CPU's model name, the CPUs this process may use,
+    the Python and the operating system."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as fh:
+            names = [ln.split(":", 1)[1].strip() for ln in fh if ln.startswith("model name")]
+        cpu = names[0] if names else cpu
+    except OSError:
+        pass
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return {
+        "cpu": cpu,
+        "cpus": cpus,
+        "python": platform.python_version(),
+        "platform": platform.platform(terse=True),
+    }
+
+
 def run(quick: bool = False) -> dict:
+    started = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M")
     repeats = 5 if quick else 15
     sizes = (64, 128, 256) if quick else (64, 128, 256, 512)
     load_before = os.getloadavg()
@@ -144,7 +166,10 @@ def run(quick: bool = False) -> dict:
         "rerun_256_s": rerun,
         "memory_256x256x16_mb": {"after_imports": base_mb, "peak": peak_mb},
         "repeats": repeats,
+        "quick": quick,
         "load_average": {"before": load_before[0], "after": os.getloadavg()[0]},
+        "date_utc": started,
+        "machine": machine(),
     }
 
 

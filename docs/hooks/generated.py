@@ -1,0 +1,109 @@
+"""MkDocs hook: the pages' generated parts, made from the code at build time (never hand-copied).
+
+A page asks for one with a marker on a line of its own:
+
+``<!-- generated: scene-keys -->``
+    every scene key with its unit, default, valid range and meaning (``lmapd keys --markdown``,
+    from the key registry of ``simcore.scene``);
+``<!-- generated: cli -->``
+    each ``lmapd`` command's ``--help``, from its argparse parser;
+``<!-- generated: bench -->``
+    the stage timings of the ``lmapd bench --json`` run committed as ``docs/data/bench.json``,
+    with the machine and the date it ran on.
+
+The same functions serve the tests (``tests/test_docs.py``), which check that every key and every
+command appears. Not part of the site (``exclude_docs`` in mkdocs.yml).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+from pathlib import Path
+
+from simcore.cli import SUBCOMMANDS, build_parser
+from simcore.scene import key_reference
+
+DOCS = Path(__file__).resolve().parent.parent
+BENCH_JSON = DOCS / "data" / "bench.json"
+MARKER = re.compile(r"^<!-- generated: ([a-z-]+) -->$", re.MULTILINE)
+FRAME_STAGES = ("hits", "echo", "background", "receiver", "detection", "cloud")
+
+
+def scene_keys_markdown() -> str:
+    """The key reference as ``lmapd keys --markdown`` prints it."""
+    lines = ["| key | unit | default | valid | meaning |", "|---|---|---|---|---|"]
+    for r in key_reference():
+        lines.append(f"| `{r['key']}` | {r['unit']} | {r['default']} | {r['valid']} | {r['doc']} |")
+    return "\n".join(lines)
+
+
+def cli_markdown() -> str:
+    """``lmapd --help`` and each command's ``--help`` (argparse's own text, 100 columns)."""
+    os.environ["COLUMNS"] = "100"  # argparse wraps to the terminal: one width for the page
+    parser = build_parser()
+    (sub,) = [a for a in parser._actions if a.dest == "command"]  # the subparsers action
+    parts = ["## lmapd", "", "```text", parser.format_help().rstrip(), "```"]
+    for module in SUBCOMMANDS:
+        name = module.__name__.rsplit(".", 1)[-1].replace("_", "-")
+        command = sub.choices[name]
+        parts += ["", f"## lmapd {name}", "", "```text", command.format_help().rstrip(), "```"]
+    return "\n".join(parts)
+
+
+def _ms(seconds: float) -> str:
+    return f"{seconds * 1e3:.1f}"
+
+
+def bench_markdown(path: Path = BENCH_JSON) -> str:
+    """The committed ``lmapd bench --json`` run as a table, headed by its machine and date."""
+    fig = json.loads(path.read_text(encoding="utf-8"))
+    machine = fig.get("machine", {})
+    head = [
+        f"Run on {fig.get('date_utc', 'an unrecorded date')} (UTC), "
+        f"{machine.get('cpu', 'an unrecorded CPU')}, {machine.get('cpus', '?')} CPUs, "
+        f"Python {machine.get('python', '?')}, {machine.get('platform', '')}; "
+        f"{fig['repeats']} frames per configuration, medians"
+        + (" (`--quick`: up to 256 x 256)." if fig.get("quick") else "."),
+        "",
+        f"MRO mesh load {_ms(fig['mesh_load_s'])} ms, BVH build {_ms(fig['bvh_build_s'])} ms "
+        "(once per target).",
+    ]
+    if "load_average" in fig:
+        load = fig["load_average"]
+        head.append(
+            f"1-minute load average {load['before']:.2f} before the run, {load['after']:.2f} after."
+        )
+    stages = [s for s in FRAME_STAGES if any(s in r["stages_s"] for r in fig["frames"])]
+    rows = [
+        "",
+        "| pixels | sub-rays | frame (ms) | ray cast alone (ms) | "
+        + " | ".join(f"{s} (ms)" for s in stages)
+        + " |",
+        "|---|---|---|---|" + "---|" * len(stages),
+    ]
+    for r in fig["frames"]:
+        cast = _ms(r["ray_cast_s"]["median"]) if "ray_cast_s" in r else "-"
+        cells = " | ".join(_ms(r["stages_s"].get(s, 0.0)) for s in stages)
+        rows.append(
+            f"| {r['pixels']} x {r['pixels']} | {r['subrays']} | {_ms(r['frame_s'])} | {cast} | "
+            f"{cells} |"
+        )
+    rerun, mem = fig["rerun_256_s"], fig["memory_256x256x16_mb"]
+    rows += [
+        "",
+        f"Cached re-run at 256 x 256 x 4: after a TNR change {_ms(rerun['tnr'])} ms, after a "
+        f"pulse-energy change {_ms(rerun['pulse_energy'])} ms. Peak memory (RSS) of a 256 x 256 x "
+        f"16-sub-ray frame: {mem['peak']:.0f} MB ({mem['after_imports']:.0f} MB after the imports "
+        "and the MRO).",
+    ]
+    return "\n".join(head + rows)
+
+
+GENERATORS = {"scene-keys": scene_keys_markdown, "cli": cli_markdown, "bench": bench_markdown}
+
+
+def on_page_markdown(markdown: str, page, config, files) -> str:
+    """Replace each marker with its generated Markdown (an unknown marker fails the build)."""
+    return MARKER.sub(lambda m: GENERATORS[m.group(1)](), markdown)

@@ -32,11 +32,11 @@ app: $(STAMP)
 test: $(STAMP) chromium
 	$(BIN)/python -m pytest
 
-## make bench: the core's stage timings (README table)
+## make bench: the core's stage timings (docs/performance.md)
 bench: $(STAMP)
 	$(BIN)/lmapd bench
 
-## make soak: 300 rapid slider changes in headless Chromium, then the figures of the README
+## make soak: 300 rapid slider changes in headless Chromium, then the figures of docs/app.md
 soak: $(STAMP) chromium
 	$(BIN)/python scripts/soak_app.py
 

@@ -5,7 +5,7 @@ receiver and a quiet one whose single photoelectron is about one sigma_n high.
 
     .venv/bin/python scripts/photon_vs_gaussian.py [--pixels 3000] [--json out.json]
 
-Prints a table; the README quotes it.
+Prints a table; docs/simulation.md quotes it.
 """
 
 from __future__ import annotations

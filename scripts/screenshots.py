@@ -1,4 +1,4 @@
-"""Regenerate the README's screenshots of the app (docs/img/app-*.png) from the current code:
+"""Regenerate the documentation's screenshots of the app (docs/img/app-*.png) from the current code:
 the real app server and Debian's headless Chromium (tests/support/launch.py), as the browser tests
 and scripts/bench_app.py drive them.
 

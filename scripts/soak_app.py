@@ -1,4 +1,4 @@
-"""Soak the live app in real headless Chromium and print the figures for the README's reliability
+"""Soak the live app in real headless Chromium and print the figures for the reliability
 section: slider changes sent, frames drawn, server memory growth, the final-state check and the
 two-clients check.
 

@@ -17,7 +17,7 @@ from ..common import CliError
 
 def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     """Register the ``bench`` subcommand on ``subparsers`` (from ``add_subparsers``)."""
-    bench = subparsers.add_parser("bench", help="median stage timings on the MRO (README table)")
+    bench = subparsers.add_parser("bench", help="median stage timings on the MRO")
     bench.add_argument("--quick", action="store_true", help="fewer repeats and sizes")
     bench.add_argument("--json", help="also write the figures to this JSON file")
     bench.add_argument(

@@ -90,7 +90,7 @@ class Detection:
     n_false_per_pixel: float | np.ndarray
     outliers: Outliers
     point_attributes: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
-    summary_figures: dict[str, object] = field(default_factory=dict)
+    summary_figures: dict[str, Any] = field(default_factory=dict)  # JSON values
 
     @property
     def n_false_expected(self) -> float:

@@ -615,12 +615,18 @@ def fit_first_photon(
     )
 
 
+_Z_NODES_FIT = special.ndtri((np.arange(32) + 0.5) / 32)  # equal-probability normal nodes
+
+
 def predict_fit(t: Timing, q: np.ndarray, alpha0: np.ndarray, start_bin: np.ndarray):
     """Expected t0 and its sd of :func:`fit_first_photon` from the expected first-avalanche
-    histogram (q : (n, L) per pulse, the first photon of each pulse: alpha0 (n,) armed when the
-    window opens): the fit of the expected histogram, and the delta method's sd of the mean of
-    the first avalanches, sqrt(Var t / S), S = N a0 sum q (the spread-based N_s adds little
-    where it is used: the delay's mean varies slowly with N_s there)."""
+    histogram (q : (n, L) per armed pulse, the first photon of each; alpha0 : (n,) the pulses
+    armed when the window opens). t0 = mean t - s E x(N_s): the mean of S = N a0 sum q first
+    avalanches spreads by Var t / S, and the fitted N_s by its own law, carried through E x at
+    32 equal-probability normal nodes (E x is bounded and bends where N_s is large, so not by
+    its slope): ln N_s from the share with Var N_s = (e^N_s - 1) / A_0; where saturated, Var x
+    from the spread with Var(Var t) = 2 (Var t)^2 / S (nearly Gaussian: the jitter), clipped
+    at 0 (no limit on N_s) and at the share's N_s."""
     armed = t.n_pulses * alpha0
     hist = armed[:, None] * q
     fit = fit_first_photon(t, hist, armed, start_bin, np.zeros(len(q)))
@@ -629,5 +635,24 @@ def predict_fit(t: Timing, q: np.ndarray, alpha0: np.ndarray, start_bin: np.ndar
     total = np.maximum(hist.sum(axis=1), 1e-300)
     mean_t = (hist * t_bin).sum(axis=1) / total
     var_t = (hist * (t_bin - mean_t[:, None]) ** 2).sum(axis=1) / total
-    sd = np.sqrt(var_t / np.maximum(total, 1.0) * (1.0 + 1.0 / np.maximum(total, 1.0)))
-    return fit.t0_s, sd
+    counts = np.maximum(total, 1.0)
+    var_mean = var_t / counts * (1.0 + 1.0 / counts)
+    a0 = np.maximum(armed, 1.0)
+    n_s = np.clip(np.nan_to_num(fit.signal_pe, nan=1e-4), 1e-4, 1e7)
+    z = _Z_NODES_FIT[None, :]
+    # from the share
+    sd_ln = np.sqrt(np.expm1(np.minimum(n_s, 50.0)) / (a0 * n_s * n_s))[:, None]
+    n_share = np.exp(np.clip(np.log(n_s)[:, None] + z * sd_ln, np.log(1e-4), np.log(1e7)))
+    # from the spread
+    share_frac = np.minimum(total / a0, 1.0 - 0.5 / a0)
+    n_floor = -np.log1p(-share_frac)[:, None]
+    s2 = t.scale_s**2
+    var_x = ((var_t - t.jitter_s**2 - t.bin_s**2 / 12.0) / s2)[:, None]
+    sd_v = (np.sqrt(2.0 / counts) * var_t / s2)[:, None]
+    n_spread = np.maximum(signal_from_spread(np.maximum(var_x + z * sd_v, 0.0)), n_floor)
+    nodes = np.where(fit.saturated[:, None], n_spread, n_share)
+    ex = first_photon_delay(nodes)[0]
+    ex_fit = first_photon_delay(n_s)[0]
+    t0 = fit.t0_s - t.scale_s * (ex.mean(axis=1) - ex_fit)
+    sd = np.sqrt(var_mean + (t.scale_s * ex.std(axis=1)) ** 2)
+    return t0, sd

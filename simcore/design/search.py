@@ -258,31 +258,57 @@ def search(
 
     dists = {v.key: _distribution(v) for v in study.variables}
     ostudy = make_optuna_study(study, n_trials)
-    screened = [r for r in previous if r.stage == "screen"][:n_trials]
-    _replay(ostudy, study, screened, dists)
-    state.records.extend(screened)
-    for r in screened:
+    queue = [r for r in previous if r.stage == "screen"][:n_trials]  # to replay, in order
+    state.records.extend(queue)
+    for r in queue:
         cache[_key(r.preset, r.params)] = r
     if progress:
-        progress(len(screened))
+        progress(len(queue))
+
+    def tell(trial, rec: Record) -> None:
+        ok = rec.error is None and all(math.isfinite(v) for v in rec.objectives)
+        for i, v in enumerate(_violations(study, rec)):
+            trial.set_constraint(f"c{i}", v)
+        if ok:
+            ostudy.tell(trial, rec.objectives)
+        else:
+            ostudy.tell(trial, state=optuna.trial.TrialState.FAIL)
+
+    screened: list[Record] = []
     per_batch = max(1, math.ceil(2 * max(evaluator.n_workers, 1) / len(study.envelope)))
     while len(screened) < n_trials:
         batch = [ostudy.ask(dists) for _ in range(min(per_batch, n_trials - len(screened)))]
-        designs = [dict(t.params) for t in batch]  # one already screened is not run again
-        recs = evaluate_designs(
-            study, designs, study.preset, "screen", evaluator, state, out, cache
-        )
+        # a resumed study: the seeded sampler proposes again what it proposed before the
+        # interrupt, and is told the recorded outcome, so the study goes on as if never stopped
+        recs: list[Record | None] = [None] * len(batch)
+        for j, trial in enumerate(batch):
+            if queue and trial.params == queue[0].params:
+                recs[j] = queue.pop(0)
+        if queue and None in recs:  # the proposals differ (other workers, another optuna)
+            for trial, rec in zip(batch, recs, strict=True):
+                if rec is None:
+                    ostudy.tell(trial, state=optuna.trial.TrialState.FAIL)
+                else:
+                    tell(trial, rec)
+            screened += [r for r in recs if r is not None]
+            _replay(ostudy, study, queue, dists)  # the rest as they are
+            screened += queue
+            queue = []
+            continue
+        new = [j for j, r in enumerate(recs) if r is None]
+        if new:  # a design screened before (a repeat proposal) is not run again
+            designs = [dict(batch[j].params) for j in new]
+            done = evaluate_designs(
+                study, designs, study.preset, "screen", evaluator, state, out, cache
+            )
+            for j, rec in zip(new, done, strict=True):
+                recs[j] = rec
+            if progress:
+                progress(len(new))
         for trial, rec in zip(batch, recs, strict=True):
-            ok = rec.error is None and all(math.isfinite(v) for v in rec.objectives)
-            for i, v in enumerate(_violations(study, rec)):
-                trial.set_constraint(f"c{i}", v)
-            if ok:
-                ostudy.tell(trial, rec.objectives)
-            else:
-                ostudy.tell(trial, state=optuna.trial.TrialState.FAIL)
-        screened += recs
-        if progress:
-            progress(len(recs))
+            assert rec is not None
+            tell(trial, rec)
+        screened += [r for r in recs if r is not None]
     return screened
 
 

@@ -167,6 +167,9 @@ def test_an_interrupted_study_keeps_every_finished_design_and_resumes(tmp_path, 
         design.run(study, out, workers=0, progress=False)  # nothing is overwritten
     resumed = design.run(study, out, workers=0, progress=False, resume=True)
     assert screened(resumed)[:4] == first and len(screened(resumed)) == 6
+    # the same designs as a study never interrupted
+    whole = design.run(study, tmp_path / "whole", workers=0, progress=False)
+    assert screened(resumed) == screened(whole)
     assert resumed.n_reused == 0 and resumed.n_run == 6 - 4 + len(resumed.records) - 6
     changed = design.study_from_dict({**SMALL, "seed": 99})
     with pytest.raises(design.StudyError, match="another study"):

@@ -2,7 +2,10 @@
 simulation: per pulse, the first of a Poisson process of N_s photoelectrons of Eq. 1's pulse
 (drawn by inverting its cumulative intensity with scipy's inverse incomplete gamma function),
 Gaussian jitter, TDC bins, and Coates' centroid over a fixed window, at 0.1, 1, 10 and 100
-photoelectrons per pulse and 100, 1,000 and 10,000 pulses. Tolerances from the trial counts."""
+photoelectrons per pulse and 100, 1,000 and 10,000 pulses; then through the pipeline, the
+summary's bias and scatter against the points' errors from the true (energy-weighted) range,
+with and without the first-photon fit, the photon-starved default frame, the CLI's warning and
+``lmapd compare``'s bias. Tolerances from the trial counts."""
 
 from __future__ import annotations
 
@@ -12,6 +15,10 @@ import numpy as np
 import pytest
 from scipy import special
 
+import simcore
+from simcore.cli import main
+from simcore.compare import compare
+from simcore.constants import C
 from simcore.receivers import gm_pileup as gp
 
 S_S = 5e-9 / 2.446386  # Gamma(2, s) scale of the default 5 ns pulse [s]
@@ -78,3 +85,81 @@ def test_the_predicted_coates_bias_and_sd_match_a_first_photon_simulation(pe, n_
     # the sd: within 4 standard errors of a sample sd (sd / sqrt(2 m)) plus 10 %, or 5 mm
     tol = 4 * sd / math.sqrt(2 * m) + max(0.1 * sd, 2 * 5e-3 / 3e8)
     assert abs(sd_pred - sd) < tol
+
+
+# ----------------------------------------------------------------------------------------------
+# through the pipeline: the summary's figures against the ground truth
+# ----------------------------------------------------------------------------------------------
+GM = {"receiver.kind": "gm_apd", "pixels": 32, "timing.range_gate_m": 200.0}
+
+
+def plate_at(plate_scene, pe, **more):
+    """A 12 m plate (25 x 25 of the 32 x 32 pixels) whose pixels get about ``pe``
+    photoelectrons per pulse."""
+    scene = plate_scene(size_m=12.0, **GM, **more)
+    res = simcore.simulate(scene)
+    scale = pe / float(np.median(res.receiver.signal_pe))
+    return simcore.with_overrides(scene, {"pulse_energy_j": scene.laser.pulse_energy_j * scale})
+
+
+@pytest.mark.parametrize("correction", ["none", "fit"])
+@pytest.mark.parametrize("pe", [0.3, 10.0, 1000.0])
+def test_the_summary_gives_the_bias_and_scatter_the_points_have(plate_scene, pe, correction):
+    scene = plate_at(plate_scene, pe, **{"gm.pileup_correction": correction})
+    res = simcore.simulate(scene)
+    d, s = res.detection, res.summary()
+    err = d.range_m[d.detected] - d.range_true_m[d.detected]
+    n = len(err)
+    assert n > 500
+    sd = float(np.std(err))
+    # the truth formula: the noise-free energy-weighted range of each pixel's echo elements
+    w, a = np.asarray(res.echo.weights), np.asarray(res.echo.arrivals_s)
+    truth = 0.5 * C * (w * a).sum(axis=1) / w.sum(axis=1)
+    np.testing.assert_allclose(d.range_true_m, truth, rtol=1e-12)
+    assert s["gm.range_error_median_m"] == pytest.approx(float(np.median(err)), abs=1e-12)
+    # predicted against measured: within 10 % or 5 mm, plus 4 standard errors of the sample
+    bias, sigma = s["gm.range_bias_m"], s["gm.range_sigma_m"]
+    assert abs(bias - err.mean()) < max(0.1 * abs(bias), 5e-3) + 4 * sd / math.sqrt(n)
+    assert abs(sigma - sd) < max(0.1 * sd, 5e-3) + 4 * sd / math.sqrt(2 * n)
+    assert s["range_sigma_m_median"] == pytest.approx(
+        float(np.median(d.range_sigma_m[d.detected])), rel=1e-12
+    )
+    piled = [line for line in s["warnings"] if "piled up" in line]
+    if pe >= 10:
+        assert s["gm.saturated_pixel_fraction"] > 0.9 and len(piled) == 1
+    else:
+        assert s["gm.saturated_pixel_fraction"] < 0.5 and not piled
+    if correction == "none" and pe >= 10:
+        assert bias < -0.15  # the piled-up centroid ranges early, and the summary says so
+    if correction == "fit":  # the first-photon fit leaves millimetres at any flux
+        assert abs(err.mean()) < 5e-3 + 4 * sd / math.sqrt(n)
+
+
+def test_the_default_geiger_mode_frame_of_the_paper_scene_is_photon_starved_and_unbiased():
+    scene = simcore.with_overrides(simcore.Scene(), {"receiver.kind": "gm_apd"})
+    res = simcore.simulate(scene)
+    d, s = res.detection, res.summary()
+    err = d.range_m[d.detected] - d.range_true_m[d.detected]
+    assert len(err) > 5000
+    assert abs(np.median(err)) < 0.02 and abs(s["gm.range_bias_m"]) < 0.02
+    assert np.median(res.receiver.signal_pe) < 1.0
+    assert s["gm.saturated_pixel_fraction"] < 0.5
+    assert not [line for line in s["warnings"] if "piled up" in line]
+    assert s["gm.frame_pulse_energy_j"] == pytest.approx(scene.laser.pulse_energy_j * 1e-5)
+
+
+def test_simulate_prints_the_pile_up_warning_and_compare_calls_the_bias_bias(
+    plate_scene, tmp_path, capsys
+):
+    argv = ["simulate", "--set", "receiver.kind=gm_apd", "--set", "pixels=32"]
+    argv += ["--set", "gm.attenuation_db=0", "--out", str(tmp_path / "c.ply")]
+    assert main(argv) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert len([ln for ln in lines if ln.startswith("warning: Geiger mode:")]) == 1
+    assert len([ln for ln in lines if ln.startswith("Geiger mode: range bias")]) == 1
+    base = plate_scene(size_m=12.0, **GM, **{"gm.attenuation_db": 0.0})
+    rows = compare(base, distances_m=(500.0,), energies_j=(5e-3,))
+    gm = next(r for r in rows if r.receiver == "gm_apd")
+    # piled up: the error is a bias several times its spread, as predicted
+    assert gm.range_bias_m < -0.3 and abs(gm.range_bias_m) > 5 * gm.range_sd_m
+    assert abs(gm.predicted_bias_m - gm.range_bias_m) < 0.1 * abs(gm.range_bias_m)

@@ -305,3 +305,24 @@ def expected_false_points(
         with_echo = _capped_stops(nu, after, k - j - 1, holdoff_m, first_delay_m=holdoff_m)
         saved += armed * (without - with_echo)
     return total - float(np.sum(p * saved))
+
+
+def draw_gross_errors(
+    rng: np.random.Generator, range_m, range_true_m, drawn, p_gross, displacement_m
+) -> np.ndarray:
+    """The discriminator's gross errors (docs/physics.md#gross-errors): each drawn echo is one
+    with probability ``p_gross``, its range then the true range plus a displacement drawn from
+    ``displacement_m`` instead of the Gaussian jitter's. (n,) ranges out [m].
+
+    range_m : (n,) the ranges with Eq. 24's noise [m]; range_true_m : (n,) noise-free [m]
+    drawn : (n,) bool, the echo crossed the threshold; p_gross : (n,) [1]
+    displacement_m : (q,) the gross errors to draw from (measured less true range) [m]
+    Two numbers are drawn per echo whatever happens, so a draw does not shift the next ones.
+    """
+    n = len(range_m)
+    u = rng.random(n)
+    pick = rng.integers(0, max(len(displacement_m), 1), size=n)
+    if not len(displacement_m):
+        return np.asarray(range_m)
+    gross = np.asarray(drawn, dtype=bool) & (u < np.asarray(p_gross))
+    return np.where(gross, np.asarray(range_true_m) + np.asarray(displacement_m)[pick], range_m)

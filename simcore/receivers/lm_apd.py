@@ -203,6 +203,7 @@ def detect(scene: Scene, echo: EchoStage, rx: LmApdResponse) -> LmApdDetection:
         noise = rng.standard_normal(n)
         with np.errstate(invalid="ignore"):
             r_meas_m = r_true_m + np.where(drawn, sigma_m * noise, 0.0)
+        r_meas_m = _gross_errors(scene, echo, rx, r_true_m, r_meas_m, drawn, holdoff_s)
         drawn, outliers = _limited_stops(
             rng, scene, echo.pixel, np.where(drawn, r_meas_m, np.nan), n_false, holdoff_s
         )
@@ -228,6 +229,27 @@ def detect(scene: Scene, echo: EchoStage, rx: LmApdResponse) -> LmApdDetection:
         threshold_pixel_w=None if threshold_pixel_a is None else threshold_pixel_a * to_w,
         saturated=rx.saturated,
         summary_figures={"n_false_points_expected": false_points},
+    )
+
+
+def _gross_errors(scene, echo, rx: LmApdResponse, r_true_m, r_meas_m, drawn, holdoff_s):
+    """(n,) ranges with the discriminator's gross errors drawn where the SNR is low enough for
+    them (docs/physics.md#gross-errors), from a stream of their own: the other draws of the
+    flash do not move. The Monte Carlo's table is computed (and cached) only when a drawn echo
+    is in its SNR range."""
+    t = scene.timing
+    from .. import gross_errors as gross  # noqa: PLC0415  (only when needed)
+
+    in_range = drawn & (rx.snr <= gross.snr_grid(t.tnr)[-1])
+    if not in_range.any():
+        return r_meas_m
+    table = gross.gross_errors(
+        rx.model, echo.shape.tau_s, echo.shape.a, scene.detector.bandwidth_hz, echo.dt_s,
+        echo.cfd_delay_s, t.cfd_fraction, t.tnr, t.resolution_s, holdoff_s,
+    )  # fmt: skip
+    rng = np.random.default_rng([scene.seed, 2024, 25])
+    return detection.draw_gross_errors(
+        rng, r_meas_m, r_true_m, drawn, table.probability_at(rx.snr), table.displacement_m
     )
 
 

@@ -11,21 +11,26 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
+import signal
 import subprocess
 import sys
 import sysconfig
+import time
+import urllib.request
 import zipfile
 from pathlib import Path
 
 import pytest
+from support.launch import free_port
 
 ROOT = Path(__file__).resolve().parent.parent
 # what the build reads: the packaging files, the README (the long description), the license, the
 # packages and the assets mapped into simcore.assets
 SOURCES = ("pyproject.toml", "setup.py", "README.md", "LICENSE", "simcore", "app", "assets")
 
-pytestmark = pytest.mark.slow  # one wheel built and installed for the module: about 10 s
+pytestmark = pytest.mark.slow  # one wheel built and installed, lmapd run from it: 30-45 s
 
 
 def build_wheel(out_dir: Path, work_dir: Path) -> Path:
@@ -96,6 +101,7 @@ def test_wheel_carries_the_assets_the_license_and_the_credits(installed):
     assert "simcore/assets/material_rules.toml" in names
     assert "simcore/assets/sweeps/example.toml" in names
     assert "simcore/py.typed" in names
+    assert "simcore/data/astm_e490_am0_900_1700nm.csv" in names  # the Sun's spectrum
     assert "app/ui/layout.py" in names
     assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names)
 
@@ -153,3 +159,38 @@ def metadata_version() -> str:
     from simcore._version import __version__
 
     return __version__
+
+
+def test_installed_wheel_serves_the_app(installed, tmp_path):
+    """``lmapd app`` from the installed package prints its address and serves the page there."""
+    bin_dir, _ = installed
+    port = free_port()
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    server = subprocess.Popen(
+        [str(bin_dir / "lmapd"), "app", "--port", str(port), "--no-spare"],
+        cwd=tmp_path,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    try:
+        deadline = time.monotonic() + 60
+        address = None
+        while address is None and time.monotonic() < deadline:
+            line = server.stdout.readline()
+            if not line:
+                break
+            found = re.search(r"(http://127\.0\.0\.1:\d+/\?token=\S+)", line)
+            address = found.group(1) if found else None
+        assert address is not None, "no address printed"
+        with urllib.request.urlopen(address, timeout=60) as page:  # the launcher starts a session
+            assert page.status == 200
+            assert b"<html" in page.read().lower()
+    finally:
+        server.send_signal(signal.SIGTERM)
+        try:
+            server.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            server.kill()
+            server.wait()

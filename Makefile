@@ -13,9 +13,13 @@ LINT_PATHS := simcore app tests scripts assets docs/hooks setup.py
 # 3 minutes with a fast connection: numpy, scipy, VTK and trame are large); later runs start at once.
 $(STAMP): pyproject.toml setup.py
 	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "lmapd-sim needs Python >= 3.11"'
-	@echo "make: creating the Python environment in $(VENV)/ (first run only)"
-	@$(PYTHON) -m venv $(VENV)
-	@echo "make: installing lmapd-sim and its dependencies into $(VENV)/ (first run: about 3 minutes)"
+	@if [ -x $(BIN)/python ]; then \
+		echo "make: updating the environment in $(VENV)/ (pyproject.toml or setup.py changed)"; \
+	else \
+		echo "make: creating the Python environment in $(VENV)/ (first run only)"; \
+		$(PYTHON) -m venv $(VENV); \
+		echo "make: installing lmapd-sim and its dependencies into $(VENV)/ (first run: about 3 minutes)"; \
+	fi
 	@$(BIN)/pip install --quiet --upgrade pip 'setuptools>=77'
 	$(BIN)/pip install --quiet -e '.[app,test,docs]'
 	@touch $(STAMP)

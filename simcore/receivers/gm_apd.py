@@ -364,8 +364,8 @@ def detect(scene: Scene, echo: EchoStage, rx: GmResponse) -> GmDetection:
     w_sum = np.asarray(echo.weights).sum(axis=1)
     r_true_m = 0.5 * C * a_num.sum(axis=1) / np.where(w_sum > 0, w_sum, 1.0)
     p_d, _ = _predicted(scene, echo, rx, k_t[echo.pixel])
-    pred_m, sigma_m = predicted_range_m(scene, echo, rx, pre, length)
-    figures = pileup_figures(scene, rx.signal_pe, pred_m - r_true_m, sigma_m, detected)
+    pred_m, sigma_m, skew = predicted_range_m(scene, echo, rx, pre, length, k_t[echo.pixel])
+    figures = pileup_figures(scene, rx.signal_pe, pred_m - r_true_m, sigma_m, skew, detected)
     figures.update(measured_figures(range_m - r_true_m, detected))
     false_pixel = np.minimum(1.0, n_windows * special.pdtrc(k_t - 1.0, mu_window))
     false_points = expected_false_points(scene, h.n_bins, width, rx.rate_hz, k_t, echo.pixel, p_d)
@@ -512,10 +512,13 @@ def _pileup_timing(scene: Scene, echo: EchoStage) -> gp.Timing:
     )
 
 
-def predicted_range_m(scene: Scene, echo: EchoStage, rx: GmResponse, pre: int, length: int):
+def predicted_range_m(
+    scene: Scene, echo: EchoStage, rx: GmResponse, pre: int, length: int, min_counts=1.0
+):
     """(n,) each lit pixel's range as its histogram gives it on average (pile-up, the
-    frame's finite pulses, jitter and bins included: :mod:`gm_pileup`) and its sd [m], for
-    the frame's estimator (the centroid, or the first-photon fit of ``gm.pileup_correction``)."""
+    frame's finite pulses, jitter and bins included: :mod:`gm_pileup`), its sd [m] and its
+    skewness [1], for the frame's estimator (the centroid, or the first-photon fit of
+    ``gm.pileup_correction``); ``min_counts``: the lit pixels' thresholds in counts."""
     gm = scene.gm
     if len(echo.pixel) == 0:
         return np.zeros(0), np.zeros(0)
@@ -535,22 +538,26 @@ def predicted_range_m(scene: Scene, echo: EchoStage, rx: GmResponse, pre: int, l
         rx.histogram.n_bins,
         gm.coates,
         gm.pileup_correction,
+        min_counts,
     )
-    return 0.5 * C * (t_lo + pred.t_s), 0.5 * C * pred.sd_s
+    return 0.5 * C * (t_lo + pred.t_s), 0.5 * C * pred.sd_s, pred.skew
 
 
 SATURATED_SHARE = 1.0 - np.exp(-1.0)  # a pixel is piled up when its echo fires it this often
 
 
-def pileup_figures(scene: Scene, signal_pe, bias_m, sigma_m, detected) -> dict:
-    """The summary's Geiger-mode figures: the predicted range bias and scatter as the
-    histogram gives them (the median bias, and the sd of the detected pixels' errors about
-    their mean: sqrt(mean sigma_i^2 + Var b_i)) [m], the share of lit pixels whose echo
-    fires them in more than 1 - 1/e of the pulses (over one photoelectron per pulse: piled
-    up), and a warning when most are."""
-    sel = detected & np.isfinite(bias_m)
+def pileup_figures(scene: Scene, signal_pe, bias_m, sigma_m, skew, detected) -> dict:
+    """The summary's Geiger-mode figures, predicted for the histogram's estimator [m]: the
+    range bias, the median of the detected pixels' errors (of the mixture of their laws, each
+    N(b_i - g_i sigma_i / 6, sigma_i^2): its median by the Cornish-Fisher term of its skewness
+    g_i, and pixels of different flux have different biases), and the scatter, the
+    sd of those errors about their mean, sqrt(mean sigma_i^2 + Var b_i); the share of lit pixels
+    with over one photoelectron per pulse (their echo fires them in more than 1 - 1/e of the
+    pulses: piled up), and a warning when most are."""
+    sel = detected & np.isfinite(bias_m) & np.isfinite(sigma_m)
     sat = float(np.mean(signal_pe > 1.0)) if len(signal_pe) else 0.0
-    bias = float(np.median(bias_m[sel])) if sel.any() else None
+    median_i = bias_m[sel] - skew[sel] * sigma_m[sel] / 6.0
+    bias = mixture_median(median_i, sigma_m[sel]) if sel.any() else None
     # the cloud's scatter about its mean: each pixel's sd and the spread of the pixels' biases
     spread = np.mean(sigma_m[sel] ** 2) + np.var(bias_m[sel]) if sel.any() else np.nan
     sigma = float(np.sqrt(spread)) if np.isfinite(spread) else None
@@ -563,13 +570,33 @@ def pileup_figures(scene: Scene, signal_pe, bias_m, sigma_m, detected) -> dict:
         "warnings": [],
     }
     if sat > 0.5:
+        if scene.gm.pileup_correction == "fit":
+            advice = "the first-photon fit corrects the ranges"
+        else:
+            advice = "raise gm.attenuation_db or set gm.pileup_correction = fit"
         figures["warnings"].append(
             f"Geiger mode: {100 * sat:.0f} % of the lit pixels are piled up (over one "
-            f"photoelectron per pulse, median {figures['gm.signal_pe_median']:.3g}): ranges "
-            f"biased by {1e3 * (bias or 0.0):+.0f} mm (predicted); raise gm.attenuation_db or "
-            "set gm.pileup_correction = fit"
+            f"photoelectron per pulse, median {figures['gm.signal_pe_median']:.3g}); range "
+            f"bias {1e3 * (bias or 0.0):+.0f} mm (predicted): {advice}"
         )
     return figures
+
+
+def mixture_median(mean, sd) -> float:
+    """The median of an equal mixture of N(mean_i, sd_i^2) (bisection on the mixture's CDF,
+    to a nanometre or 200 steps) [same unit]."""
+    mean = np.asarray(mean, dtype=np.float64)
+    sd = np.maximum(np.asarray(sd, dtype=np.float64), 1e-12)
+    lo, hi = float(np.min(mean - 9 * sd)), float(np.max(mean + 9 * sd))
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if np.mean(special.ndtr((mid - mean) / sd)) < 0.5:
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo < 1e-9:
+            break
+    return 0.5 * (lo + hi)
 
 
 def measured_figures(error_m, detected) -> dict:

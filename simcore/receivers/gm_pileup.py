@@ -340,11 +340,15 @@ class Prediction:
     t_s : (n,) expected centroid from the gate's opening [s] (NaN where no signal)
     sd_s : (n,) its standard deviation [s]
     signal_counts : (n,) expected signal avalanches of the frame in the window [1]
+    skew : (n,) its skewness [1]: the window's third cumulant over its variance^1.5, over the
+        square root of the counts (a mean of S events); few counts of Eq. 1's skewed pulse
+        put the median below the mean by about skew x sd / 6
     """
 
     t_s: np.ndarray
     sd_s: np.ndarray
     signal_counts: np.ndarray
+    skew: np.ndarray
 
 
 def coates_centroid(
@@ -354,9 +358,11 @@ def coates_centroid(
     start_bin: np.ndarray,
     background_per_bin: np.ndarray,
     coates: bool = True,
+    min_counts=1.0,
 ) -> Prediction:
     """Expected centroid and its sd of Coates' estimates (``coates``) or of the raw counts
-    less the background over each pixel's window (module docstring)."""
+    less the background over each pixel's window (module docstring); ``min_counts`` (scalar or
+    (n,)): the counts a detected pixel has at least (its threshold)."""
     n_b = q.shape[1]
     bg = background_per_bin[:, None]
     t_bin = (start_bin[:, None] + np.arange(n_b)[None, :] + 0.5) * t.bin_s
@@ -390,13 +396,46 @@ def coates_centroid(
         var_z = ((c * c * q).sum(axis=1) - cq * cq) / t.n_pulses
     var_t = np.maximum(var_z, 0.0) / (safe * safe)
     signal = t.n_pulses * np.maximum(q - bg, 0.0).sum(axis=1)
-    # the ratio's own spread with a Poisson number of counts: E[1/S] ~ (1 + 1/S) / S
-    var_t = var_t * (1.0 + 1.0 / np.maximum(signal, 1.0))
+    # the ratio's own spread with a Poisson number of counts, given the pixel was detected
+    var_t = var_t * signal * inverse_count_mean(signal, min_counts)
     return Prediction(
         t_s=np.where(ok, t_c, np.nan),
         sd_s=np.where(ok, np.sqrt(var_t), np.nan),
         signal_counts=signal,
+        skew=_skew(mean_v, c, signal),
     )
+
+
+def inverse_count_mean(mean_counts, min_counts=1.0) -> np.ndarray:
+    """E[1 / S | S >= k] of S ~ Poisson(mu), elementwise [1]: a centroid of S events spreads by
+    Var / S, and a detected pixel has at least its threshold k (>= 1) of them. Summed exactly
+    below mu = 50, (1 + 1/mu) / mu above (the next terms are O(mu^-3))."""
+    mu = np.asarray(mean_counts, dtype=np.float64)
+    k = np.broadcast_to(np.maximum(np.asarray(min_counts, dtype=np.float64), 1.0), mu.shape)
+    m = np.maximum(mu, 1e-12)
+    out = (1.0 + 1.0 / m) / m
+    small = mu < 50.0
+    if small.any():
+        s = np.arange(1, 141)[None, :]
+        ms, ks = m[small][:, None], k[small][:, None]
+        p = np.exp(special.xlogy(s, ms) - ms - special.gammaln(s + 1.0)) * (s >= ks)
+        total = p.sum(axis=1)
+        est = (p / s).sum(axis=1) / np.maximum(total, 1e-300)
+        # beyond reach (k far above mu): the pixel holds about k counts
+        out[small] = np.where(total > 1e-250, est, 1.0 / ks[:, 0])
+    return out
+
+
+def _skew(weights, c, counts) -> np.ndarray:
+    """(n,) skewness of a mean of ``counts`` events distributed as ``weights`` over offsets
+    ``c`` from their mean (per row): k3 / k2^1.5 / sqrt(counts)."""
+    w = np.maximum(weights, 0.0)
+    total = np.maximum(w.sum(axis=1), 1e-300)
+    k2 = (w * c * c).sum(axis=1) / total
+    k3 = (w * c * c * c).sum(axis=1) / total
+    with np.errstate(divide="ignore", invalid="ignore"):
+        g = k3 / k2**1.5 / np.sqrt(np.maximum(counts, 1.0))
+    return np.where(np.isfinite(g), g, 0.0)
 
 
 def expected_windows(
@@ -456,21 +495,23 @@ def predict_pixels(
     n_gate_bins: int,
     coates: bool = True,
     correction: str = "none",
+    min_counts=1.0,
 ) -> Prediction:
     """The range estimate of each lit pixel as its histogram gives it, from the gate's opening
     [s]: the echo's start (the centroid less 2 s, Eq. 1's mean delay; or the first-photon
     fit's t0, ``correction = "fit"``), and its sd (module docstring; arguments as
-    :func:`expected_windows`)."""
+    :func:`expected_windows`; ``min_counts``: each pixel's detection threshold in counts)."""
     start_bin, q, alpha = expected_windows(
         t, element_t_s, element_pe, rate_hz, armed_at_start, width, pre, length, n_gate_bins
     )
     bg = rate_hz * t.bin_s
-    centroid = coates_centroid(t, q, alpha, start_bin, bg, coates)
+    centroid = coates_centroid(t, q, alpha, start_bin, bg, coates, min_counts)
     if correction != "fit":
         return Prediction(
             t_s=centroid.t_s - 2.0 * t.scale_s,
             sd_s=centroid.sd_s,
             signal_counts=centroid.signal_counts,
+            skew=centroid.skew,
         )
     first = Timing(
         scale_s=t.scale_s,
@@ -483,8 +524,10 @@ def predict_pixels(
     q1, _ = expected_histogram(
         first, element_t_s, element_pe, np.zeros_like(rate_hz), start_bin, length, a0
     )
-    t0, sd = predict_fit(first, q1 / np.maximum(a0, 1e-300)[:, None], a0, start_bin)
-    return Prediction(t_s=t0, sd_s=sd, signal_counts=centroid.signal_counts)
+    t0, sd, skew = predict_fit(
+        first, q1 / np.maximum(a0, 1e-300)[:, None], a0, start_bin, min_counts
+    )
+    return Prediction(t_s=t0, sd_s=sd, signal_counts=centroid.signal_counts, skew=skew)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -618,11 +661,14 @@ def fit_first_photon(
 _Z_NODES_FIT = special.ndtri((np.arange(32) + 0.5) / 32)  # equal-probability normal nodes
 
 
-def predict_fit(t: Timing, q: np.ndarray, alpha0: np.ndarray, start_bin: np.ndarray):
-    """Expected t0 and its sd of :func:`fit_first_photon` from the expected first-avalanche
-    histogram (q : (n, L) per armed pulse, the first photon of each; alpha0 : (n,) the pulses
-    armed when the window opens). t0 = mean t - s E x(N_s): the mean of S = N a0 sum q first
-    avalanches spreads by Var t / S, and the fitted N_s by its own law, carried through E x at
+def predict_fit(
+    t: Timing, q: np.ndarray, alpha0: np.ndarray, start_bin: np.ndarray, min_counts=1.0
+):
+    """Expected t0, its sd and skewness of :func:`fit_first_photon` from the expected
+    first-avalanche histogram (q : (n, L) per armed pulse, the first photon of each; alpha0 :
+    (n,) the pulses armed when the window opens). t0 = mean t - s E x(N_s): the mean of
+    S = N a0 sum q first avalanches spreads by Var t E[1/S | S >= k] (k: ``min_counts``), and
+    the fitted N_s by its own law, carried through E x at
     32 equal-probability normal nodes (E x is bounded and bends where N_s is large, so not by
     its slope): ln N_s from the share with Var N_s = (e^N_s - 1) / A_0; where saturated, Var x
     from the spread with Var(Var t) = 2 (Var t)^2 / S (nearly Gaussian: the jitter), clipped
@@ -636,7 +682,7 @@ def predict_fit(t: Timing, q: np.ndarray, alpha0: np.ndarray, start_bin: np.ndar
     mean_t = (hist * t_bin).sum(axis=1) / total
     var_t = (hist * (t_bin - mean_t[:, None]) ** 2).sum(axis=1) / total
     counts = np.maximum(total, 1.0)
-    var_mean = var_t / counts * (1.0 + 1.0 / counts)
+    var_mean = var_t * inverse_count_mean(total, min_counts)
     a0 = np.maximum(armed, 1.0)
     n_s = np.clip(np.nan_to_num(fit.signal_pe, nan=1e-4), 1e-4, 1e7)
     z = _Z_NODES_FIT[None, :]
@@ -655,4 +701,5 @@ def predict_fit(t: Timing, q: np.ndarray, alpha0: np.ndarray, start_bin: np.ndar
     ex_fit = first_photon_delay(n_s)[0]
     t0 = fit.t0_s - t.scale_s * (ex.mean(axis=1) - ex_fit)
     sd = np.sqrt(var_mean + (t.scale_s * ex.std(axis=1)) ** 2)
-    return t0, sd
+    skew = _skew(hist, t_bin - mean_t[:, None], total) * np.sqrt(var_mean) / np.maximum(sd, 1e-300)
+    return t0, sd, skew

@@ -21,7 +21,7 @@ from trame.app import get_server
 import simcore
 from app import security
 from app.engine import Engine
-from app.logic import flyaround, parts
+from app.logic import flyaround, parts, studies
 from app.logic.controller import AppLogic
 from app.state import STATE_KEYS
 from app.ui.layout import build_layout
@@ -96,6 +96,7 @@ def client_keys() -> dict[str, security.Screen]:
     keys["materials"] = security.mapping_of_names
     keys.update({key: security.scalar for key in flyaround.STATE_KEYS})
     keys.update({key: security.scalar for key in parts.STATE_KEYS})
+    keys.update({key: security.scalar for key in studies.STATE_KEYS})
     keys.update(
         {
             "fly_playing": security.scalar,
@@ -143,6 +144,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--no-preview",
         action="store_true",
         help="always wait for the fidelity preset's frame (no quick preview first; for comparison)",
+    )
+    parser.add_argument(
+        "--studies",
+        default=None,
+        metavar="DIR",
+        help="a folder of finished design studies (lmapd design --out DIR/NAME) for the Design "
+        "panel to open",
     )
     parser.add_argument(
         "--shared",
@@ -218,6 +226,8 @@ def run_launcher(args: argparse.Namespace) -> int:
         return 2
     token = secrets.token_urlsafe(32)
     options = ("--no-preview",) if args.no_preview else ()
+    if args.studies:
+        options += ("--studies", os.path.abspath(args.studies))
     door = launcher.Launcher(token, args.host, caps, scene=args.scene, options=options)
 
     def announce(port: int) -> None:
@@ -256,7 +266,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         token = read_token_and_watch_stdin() if args.token_stdin else None
         scene = simcore.load_scene(args.scene)
-        app = LmapdApp(scene, previews=not args.no_preview)
+        app = LmapdApp(scene, previews=not args.no_preview, studies_dir=args.studies)
     except (simcore.SceneError, simcore.TargetError, OSError, ValueError) as exc:
         print(f"lmapd app: {exc}", file=sys.stderr)
         return 2

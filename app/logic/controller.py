@@ -31,6 +31,7 @@ from app.logic.pacing import FramePacer
 from app.logic.parts import PartHighlight
 from app.logic.scene_map import resolved_materials, scene_from_controls
 from app.logic.selection import PixelSelection
+from app.logic.studies import DesignStudies
 from app.logic.upload import LoadedTarget, TargetUploads
 from app.payloads import scene3d, stats, style
 from app.runner import Outcome, Runner
@@ -59,6 +60,7 @@ class AppLogic:
         ack_timeout_s: float = 1.0,
         max_in_flight: int = 2,
         previews: bool = True,
+        studies_dir: str | None = None,
     ):
         self.server = server
         self.state = server.state
@@ -99,6 +101,8 @@ class AppLogic:
         )
         self.lessons = LessonGuide(self.state)  # one-click scenes with a card (their own state)
         self.compare = FrameCompare(self.state)  # a pinned frame beside the new one
+        self.studies = DesignStudies(self.state, studies_dir, self.open_scene)  # Design page
+        server.trigger("open_design")(self.studies.open_design)
         server.trigger("pin_frame")(self.pin_frame)
         server.trigger("unpin_frame")(self.compare.unpin)
         self.parts = PartHighlight(self.state, lambda: self.engine.model)  # in the 3D scene
@@ -232,6 +236,19 @@ class AppLogic:
             )
         self.parts.reset()
         self.on_controls_change()
+
+    def open_scene(self, scene: simcore.Scene, label: str) -> None:
+        """Show ``scene`` (a design study's design): it becomes the scene a reset returns to,
+        on its own target (loaded if it is another), its values on the controls."""
+        same = scene.target == self.base_scene.target
+        engine = self.engine if same else Engine(scene)
+        initial, messages = controls_from_scene(scene, resolved_materials(engine.model, scene))
+        name = self.state.target_name if same else scene.target.mesh
+        with self.state:
+            self.state.update(
+                {**initial.as_state(), "input_message": "; ".join([f"Opened {label}", *messages])}
+            )
+        self.use_target(scene, engine, initial, name)
 
     def fit_field_of_view(self, *_: Any, **__: Any) -> None:
         """Set the distance at which the target just fills the field of view at any attitude

@@ -11,7 +11,7 @@ from trame.widgets import vuetify3 as v3
 import simcore
 from app.logic.scene_map import preset_text
 from app.state import PRESET_CHOICES, SPECS, SUBRAY_CHOICES, ControlSpec
-from app.ui import flyaround, lessons
+from app.ui import design, flyaround, lessons
 from app.ui.upload import upload_panel
 from app.ui.widgets import a11y_attributes, html_attributes, labelled_toggle
 
@@ -385,6 +385,7 @@ def drawer_content() -> None:
         materials_panel()
         upload_panel()
         share_panel()
+        design.study_chooser()
         section("Display")
         display_choices()
         section("Download (the frame shown)")

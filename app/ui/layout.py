@@ -7,7 +7,7 @@ from trame.ui.vuetify3 import VAppLayout
 from trame.widgets import client, html
 from trame.widgets import vuetify3 as v3
 
-from app.ui import controls, lessons, panels, views3d
+from app.ui import controls, design, lessons, panels, views3d
 from app.ui.widgets import html_attributes
 
 # After the page applied a frame, wait until it is on screen, then tell the server (frame pacing)
@@ -312,6 +312,7 @@ def views_grid() -> None:
     with v3.VContainer(fluid=True, classes="pa-2"):
         messages()
         lessons.lesson_card()
+        design.study_card()
         with v3.VRow(dense=True):
             with v3.VCol(cols=12, lg=6):
                 views3d.scene_card()

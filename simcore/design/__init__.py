@@ -51,6 +51,8 @@ from .study import Requirement, Study, StudyError, Variable, load_study, study_f
 
 __all__ = [
     "DesignResult",
+    "StudyFolder",
+    "open_study",
     "Record",
     "Requirement",
     "Study",
@@ -149,7 +151,7 @@ def run(
     check_figures(study)
     out.mkdir(parents=True, exist_ok=True)
     io.write_json(out / "study.json", {"fingerprint": study.fingerprint, "source": study.source})
-    if study.text and study.source != "<python>":
+    if _is_toml(study.text):  # the study, for open_study and the app
         (out / STUDY_COPY).write_text(study.text)
     state = SearchState(next_number=1 + max((r.number for r in previous), default=-1))
     cache = {f"{r.preset} {_json(r.params)}": r for r in previous if r.stage != "screen"}
@@ -181,6 +183,50 @@ def run(
     )
     _write_outputs(result)
     return result
+
+
+@dataclass(frozen=True)
+class StudyFolder:
+    """A finished (or interrupted) study read back from its folder: the study, every record,
+    the front, the confirmations and the winner, as :func:`run` chose them."""
+
+    study: Study
+    out_dir: Path
+    records: tuple[Record, ...]
+    front: tuple[Record, ...]
+    confirmed: tuple[Record, ...]
+    winner: Record | None
+
+
+def open_study(out_dir: str | Path) -> StudyFolder:
+    """Read a study's output folder (its ``study.toml`` and ``records/``). Raises StudyError
+    naming the folder if it holds no study."""
+    out = Path(out_dir)
+    if not (out / STUDY_COPY).is_file():
+        raise StudyError(f"{out} holds no study ({STUDY_COPY} is missing)")
+    study = load_study(out / STUDY_COPY)
+    records = sorted(load_records(out), key=lambda r: r.number)
+    candidates = [r for r in records if r.stage in ("screen", "polish")]
+    front = _front(study, candidates)
+    confirmed = [r for r in records if r.stage == "confirm"]
+    return StudyFolder(
+        study=study,
+        out_dir=out,
+        records=tuple(records),
+        front=tuple(front),
+        confirmed=tuple(confirmed),
+        winner=_winner(study, front, confirmed),
+    )
+
+
+def _is_toml(text: str) -> bool:
+    import tomllib  # noqa: PLC0415
+
+    try:
+        tomllib.loads(text)
+    except tomllib.TOMLDecodeError:
+        return False
+    return bool(text)
 
 
 def _json(params) -> str:

@@ -273,10 +273,21 @@ def study_from_dict(
         minimize=minimize,
         cost=cost,
         source=source,
-        text=text if text is not None else repr(sorted(data.items(), key=lambda kv: kv[0])),
+        text=text if text is not None else _as_toml(data),
     )
     _check_points(study, where)
     return study
+
+
+def _as_toml(data: Mapping[str, Any]) -> str:
+    """The study's tables as TOML (what ``study.toml`` in its folder holds), or their repr where
+    they hold something TOML cannot (a Scene as the base)."""
+    import tomli_w  # noqa: PLC0415
+
+    try:
+        return tomli_w.dumps(dict(data))
+    except TypeError:
+        return repr(sorted(data.items(), key=lambda kv: kv[0]))
 
 
 def _table(data, key: str, where: str) -> Mapping[str, Any]:

@@ -190,7 +190,10 @@ def _reads(s: Scene) -> tuple:
         s.laser.pulse_width_s,
         s.laser.divergence_rad,
         s.transmit,
-        s.receive,
+        # the optics the echo scales with (its filter acts on the background light only)
+        s.receive.aperture_diameter_m,
+        s.receive.transmittance,
+        s.receive.fov_rad,
         s.target.materials,
         s.detector.bandwidth_hz,
         s.detector.pixels,

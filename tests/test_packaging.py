@@ -176,14 +176,15 @@ def test_installed_wheel_serves_the_app(installed, tmp_path):
     )
     try:
         deadline = time.monotonic() + 60
-        address = None
+        address, printed = None, []
         while address is None and time.monotonic() < deadline:
             line = server.stdout.readline()
-            if not line:
+            if not line:  # the server ended
                 break
+            printed.append(line)
             found = re.search(r"(http://127\.0\.0\.1:\d+/\?token=\S+)", line)
             address = found.group(1) if found else None
-        assert address is not None, "no address printed"
+        assert address is not None, f"no address printed: {''.join(printed)}"
         with urllib.request.urlopen(address, timeout=60) as page:  # the launcher starts a session
             assert page.status == 200
             assert b"<html" in page.read().lower()

@@ -729,8 +729,8 @@ def _first_photon(scene, rx: GmResponse, lo_bin, hi_bin, lit_of, s_scale):
 def first_photon_cloud(result):
     """The single-pulse first-photon cloud of a ``gm_apd`` result: one point per pixel that
     fired in the frame's first pulse, at its first avalanche's range (``is_outlier`` where it
-    was not the echo's), with the cloud's attributes."""
-    from ..pointcloud import assemble_cloud  # noqa: PLC0415
+    was not the echo's), with the cloud's attributes and ground truth."""
+    from ..pointcloud import assemble_cloud, ground_truth  # noqa: PLC0415  (upward: pointcloud)
 
     d, e, rx = result.detection, result.echo, result.receiver
     if not isinstance(d, GmDetection):
@@ -742,7 +742,7 @@ def first_photon_cloud(result):
     echo_pix = fired[d.first_photon_is_echo[fired]]
     noise_pix = fired[~d.first_photon_is_echo[fired]]
     li = lit_of[echo_pix]
-    return assemble_cloud(
+    cloud = assemble_cloud(
         result.rays.pixel_directions,
         result.pixels,
         echo_pix,
@@ -754,6 +754,16 @@ def first_photon_cloud(result):
         noise_pix,
         d.first_photon_range_m[noise_pix],
     )
+    truth = ground_truth(
+        e,
+        result.hits,
+        li,
+        d.first_photon_range_m[echo_pix],
+        len(noise_pix),
+        tau_m=result.scene.quality.tau_m,
+    )
+    cloud.attributes.update(truth)
+    return cloud
 
 
 def _detection_reads(s: Scene) -> tuple:

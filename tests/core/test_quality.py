@@ -250,3 +250,22 @@ def test_quality_is_computed_only_when_asked_for():
     assert with_quality.extras["quality"] == result.quality
     with pytest.raises(ValueError, match="optional stage"):
         pipeline.run(result.scene, extras=("colour",))
+
+
+def test_the_geiger_mode_first_photon_cloud_carries_the_ground_truth():
+    from simcore.pointcloud import GROUND_TRUTH
+    from simcore.receivers import gm_apd
+
+    result = simcore.simulate(
+        with_overrides(Scene(), {"receiver.kind": "gm_apd", "detector.pixels": 24})
+    )
+    cloud = gm_apd.first_photon_cloud(result)
+    attrs = cloud.attributes
+    assert {name for name, _ in GROUND_TRUTH} <= set(attrs)
+    echo = ~attrs["is_outlier"]
+    assert echo.any()
+    assert np.isfinite(attrs["true_range_m"][echo]).all()
+    assert np.array_equal(
+        attrs["range_error_m"][echo], attrs["range_m"][echo] - attrs["true_range_m"][echo]
+    )
+    assert np.isnan(attrs["true_range_m"][~echo]).all() and attrs["outlier"][~echo].all()

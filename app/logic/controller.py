@@ -34,6 +34,7 @@ from app.logic.selection import PixelSelection
 from app.logic.studies import DesignStudies
 from app.logic.upload import LoadedTarget, TargetUploads
 from app.payloads import scene3d, stats, style
+from app.payloads import waveforms as waveforms_payload
 from app.runner import Outcome, Runner
 from app.state import STATE_KEYS, Controls, controls_from_scene, preset_of
 from simcore.target import fov_fill_distance_m, parts_table
@@ -163,6 +164,7 @@ class AppLogic:
                 "pixel_readout": None,
                 "selection_colors": list(style.SELECTION_COLORS),
                 "waveforms": {"data": [], "layout": {}},
+                "view_text": waveforms_payload.view_text(self.base_scene.receiver.kind),
                 "snr_hist": {"data": [], "layout": {}},
                 "stats": [],
                 "stages": [],
@@ -449,6 +451,7 @@ class AppLogic:
             "array_image": frame.image,
             "selected_pixels": selection,
             "waveforms": waveforms,
+            "view_text": waveforms_payload.view_text(frame.result.scene.receiver.kind),
             "snr_hist": frame.snr_histogram,
             "stats": frame.stats,
             "stages": stats.stage_rows(

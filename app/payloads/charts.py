@@ -1,5 +1,9 @@
 """The plotly layout pieces the charts share: axes, a light layout, marker lines, notes."""
 
+import math
+
+from simcore.constants import C as C_M_S
+
 
 def axis(title: str, **extra) -> dict:
     return {
@@ -48,4 +52,59 @@ def note(text: str) -> dict:
         "y": 0.5,
         "showarrow": False,
         "font": {"size": 13, "color": "#757575"},
+    }
+
+
+def nice_step(span: float, n_ticks: int = 6) -> float:
+    """A 1, 2 or 5 x 10^k step that cuts ``span`` into about ``n_ticks`` intervals."""
+    raw = max(span, 1e-12) / n_ticks
+    power = 10.0 ** math.floor(math.log10(raw))
+    return next(m * power for m in (1.0, 2.0, 5.0, 10.0) if m * power >= raw)
+
+
+def _decimals(step: float) -> int:
+    return max(0, -math.floor(math.log10(step) + 1e-9))
+
+
+def time_axis(layout: dict, lo_ns: float, hi_ns: float) -> None:
+    """The chart's time axis over [lo_ns, hi_ns]: ticks every 1, 2 or 5 x 10^k ns written in
+    full with thousands separators (20,005 ns, not "20.005k"), to the step's decimals."""
+    step = nice_step(hi_ns - lo_ns)
+    layout["xaxis"].update(
+        range=[lo_ns, hi_ns],
+        tick0=0,
+        dtick=step,
+        tickformat=f",.{_decimals(step)}f",
+        hoverformat=",.2f",
+    )
+
+
+def range_axis(layout: dict, lo_ns: float, hi_ns: float) -> dict:
+    """A top axis giving the range c t / 2 [m] of the chart's times: its ticks at round ranges,
+    placed on the time axis it follows (zoom and pan move both). Returns the empty trace that
+    shows it (plotly draws an axis that a trace uses)."""
+    lo_m, hi_m = lo_ns * 1e-9 * C_M_S / 2.0, hi_ns * 1e-9 * C_M_S / 2.0
+    step = nice_step(hi_m - lo_m)
+    first = math.ceil(lo_m / step)
+    ranges = [k * step for k in range(first, math.floor(hi_m / step) + 1)]
+    digits = _decimals(step)
+    layout["xaxis2"] = axis(
+        "range c t / 2 (m)",
+        matches="x",
+        overlaying="x",
+        side="top",
+        showgrid=False,
+        tickvals=[round(2.0 * r / C_M_S * 1e9, 6) for r in ranges],
+        ticktext=[f"{r:,.{digits}f}" for r in ranges],
+    )
+    layout["xaxis2"]["title"]["standoff"] = 2
+    return {
+        "type": "scatter",
+        "mode": "lines",
+        "x": [lo_ns, hi_ns],
+        "y": [None, None],
+        "xaxis": "x2",
+        "name": "range axis",
+        "showlegend": False,
+        "hoverinfo": "skip",
     }

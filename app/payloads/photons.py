@@ -1,6 +1,8 @@
 """The Geiger-mode array's chart: the selected pixels' photon-count histograms of the frame's
-pulses, with the counts expected without dead time or jitter drawn over them (their difference
-at the echo's leading edge is the pile-up)."""
+pulses, with the counts expected from the same pulses drawn over them (dead time, jitter and
+bins included: what the histogram should show on average) and the counts that would come
+without dead time (on their own axis when they dwarf the histogram: their difference from the
+measured counts at the echo's leading edge is the pile-up)."""
 
 from __future__ import annotations
 
@@ -9,21 +11,29 @@ import math
 import numpy as np
 
 import simcore
-from app.payloads.charts import base_layout, note
+from app.payloads.charts import base_layout, note, range_axis, time_axis
 from app.payloads.style import SELECTION_COLORS
+from simcore.constants import C as C_M_S
+from simcore.receivers import gm_pileup
 from simcore.receivers.gm_apd import frame_pulse_energy_j, photon_energy_j
+from simcore.receivers.gm_limits import armed_probability
 
 MARGIN_BINS = 12  # bins shown either side of the echo's waveform
 NO_ECHO_BINS = 80  # bins shown around the busiest bin of a pixel without an echo
+OWN_AXIS_RATIO = 2.0  # the no-dead-time curve gets its own axis when it peaks this much higher
 
 
 def photon_figure(result: simcore.Result, selection: list) -> dict:
     """The plotly figure of the selected pixels' histograms (counts per TDC bin over
-    ``gm.pulses`` pulses, against time since emission) and their expected counts."""
+    ``gm.pulses`` pulses, against time since emission), their expected counts with the dead
+    time, and without it (right-hand axis when it would flatten the histogram)."""
     scene, rx = result.scene, result.receiver
     gm, n = scene.gm, result.pixels
-    data: list[dict] = []
+    bars: list[dict] = []
+    with_dead: list[dict] = []
+    without: list[dict] = []
     annotations: list[dict] = []
+    span: list[float] = []
     for i, (row, col) in enumerate(selection):
         color = SELECTION_COLORS[i % len(SELECTION_COLORS)]
         flat = int(row) * n + int(col)
@@ -32,43 +42,86 @@ def photon_figure(result: simcore.Result, selection: list) -> dict:
         k0, k1 = _window_bins(w, bins, counts, rx.gate_start_s, gm.bin_s, rx.histogram.n_bins)
         shown = (bins >= k0) & (bins < k1)
         elsewhere = int(counts[~shown].sum())
-        data.append(
+        x_bars = _centre_ns(rx.gate_start_s, gm.bin_s, bins[shown])
+        bars.append(
             {
                 "type": "bar",
-                "x": _centre_ns(rx.gate_start_s, gm.bin_s, bins[shown]).tolist(),
+                "x": x_bars.tolist(),
                 "y": counts[shown].tolist(),
+                "customdata": _range_m(x_bars).tolist(),
                 "width": gm.bin_s * 1e9,
-                "name": f"({row}, {col}) counts"
+                "name": f"({row}, {col}) measured counts"
                 + (f", {elsewhere:,} more elsewhere in the gate" if elsewhere else ""),
-                "marker": {"color": color, "opacity": 0.55},
-                "hovertemplate": "%{x:.2f} ns: %{y} counts<extra></extra>",
+                "marker": {"color": color, "opacity": 0.6},
+                "hovertemplate": "%{x:,.2f} ns (%{customdata:,.2f} m): %{y} counts"
+                "<extra>measured</extra>",
             }
         )
         k = np.arange(k0, k1)
-        expected = _expected_counts(result, w, flat, k)
-        data.append(
+        x = _centre_ns(rx.gate_start_s, gm.bin_s, k)
+        span += [float(x[0]) - gm.bin_s * 1e9, float(x[-1]) + gm.bin_s * 1e9]
+        common = {"type": "scatter", "mode": "lines", "x": x.tolist()}
+        common["customdata"] = _range_m(x).tolist()
+        with_dead.append(
             {
-                "type": "scatter",
-                "mode": "lines",
-                "x": _centre_ns(rx.gate_start_s, gm.bin_s, k).tolist(),
-                "y": expected.tolist(),
-                "name": f"({row}, {col}) expected (no dead time, no jitter)",
-                "line": {"color": color, "width": 1.5, "shape": "hvh"},
-                "hovertemplate": "%{x:.2f} ns: %{y:.3g} expected<extra></extra>",
+                **common,
+                "y": np.round(expected_counts(result, w, flat, k0, k1), 4).tolist(),
+                "name": f"({row}, {col}) expected (same pulses, dead time and jitter)",
+                "line": {"color": color, "width": 2, "shape": "hvh"},
+                "hovertemplate": "%{x:,.2f} ns (%{customdata:,.2f} m): %{y:.3g} expected"
+                "<extra>with dead time</extra>",
+            }
+        )
+        without.append(
+            {
+                **common,
+                "y": np.round(_arriving_counts(result, w, flat, k), 4).tolist(),
+                "name": f"({row}, {col}) without dead time",
+                "line": {"color": color, "width": 1.2, "dash": "dot", "shape": "hvh"},
+                "hovertemplate": "%{x:,.2f} ns (%{customdata:,.2f} m): %{y:.3g} expected"
+                "<extra>without dead time</extra>",
             }
         )
     if not selection:
         annotations.append(note("Click a pixel of the detector array to see its photon counts"))
+    left_peak = max([max(t["y"], default=0) for t in bars + with_dead] + [1.0])
+    right_peak = max([max(t["y"], default=0) for t in without] + [0.0])
+    own_axis = right_peak > OWN_AXIS_RATIO * left_peak
     layout = base_layout(
         "time since emission (ns)",
-        f"avalanches per {gm.bin_s * 1e12:.0f} ps bin ({gm.pulses} pulses)",
+        f"avalanches per {gm.bin_s * 1e12:.0f} ps bin ({gm.pulses:,} pulses)",
         legend={"orientation": "h", "x": 0, "y": 1.01, "yanchor": "bottom", "font": {"size": 10}},
         annotations=annotations,
         barmode="overlay",
         hovermode="closest",
     )
-    layout["margin"]["t"] = 10 + 18 * math.ceil(len(data) / 2)
+    if own_axis:
+        for trace in without:
+            trace["yaxis"] = "y2"
+            trace["name"] += " (right axis)"
+        layout["yaxis2"] = {
+            "title": {"text": "without dead time (right axis)", "font": {"color": "#757575"}},
+            "overlaying": "y",
+            "side": "right",
+            "showgrid": False,
+            "zeroline": False,
+            "rangemode": "tozero",
+            "ticks": "outside",
+            "tickfont": {"color": "#757575"},
+        }
+        layout["margin"]["r"] = 60
+    layout["yaxis"]["rangemode"] = "tozero"
+    data = bars + with_dead + without
+    if span:
+        time_axis(layout, min(span), max(span))
+        data.append(range_axis(layout, min(span), max(span)))
+    layout["margin"]["t"] = 10 + 18 * math.ceil(len(bars) * 3 / 2) + (34 if span else 0)
     return {"data": data, "layout": layout}
+
+
+def _range_m(t_ns: np.ndarray) -> np.ndarray:
+    """The range a time since emission means, c t / 2 [m], to the centimetre."""
+    return np.round(np.asarray(t_ns) * 1e-9 * C_M_S / 2.0, 2)
 
 
 def _centre_ns(gate_start_s: float, bin_s: float, k: np.ndarray) -> np.ndarray:
@@ -89,7 +142,45 @@ def _window_bins(w, bins, counts, gate_start_s: float, bin_s: float, n_bins: int
     return max(lo, 0), min(max(hi, lo + 1), n_bins)
 
 
-def _expected_counts(result: simcore.Result, w, flat: int, k: np.ndarray) -> np.ndarray:
+def _element_pe(result: simcore.Result, flat: int) -> tuple[np.ndarray, np.ndarray]:
+    """(1, K) arrival from the gate's opening [s] and mean photoelectrons per pulse of each
+    echo element of pixel ``flat`` (one empty element for a pixel without an echo)."""
+    scene, echo, rx = result.scene, result.echo, result.receiver
+    at = np.flatnonzero(np.asarray(echo.pixel) == flat)
+    if not len(at):
+        return np.zeros((1, 1)), np.zeros((1, 1))
+    per_weight = (
+        scene.gm.pde * frame_pulse_energy_j(scene) / photon_energy_j(scene.laser.wavelength_m)
+    )
+    arrivals = np.asarray(echo.arrivals_s)[at] - rx.gate_start_s
+    return arrivals, per_weight * np.asarray(echo.weights)[at]
+
+
+def expected_counts(result: simcore.Result, w, flat: int, k0: int, k1: int) -> np.ndarray:
+    """(k1 - k0,) the avalanches bins k0 .. k1 - 1 of pixel ``flat`` hold on average over the
+    frame's pulses: its echo and constant rate through the dead time, the jitter and the bins
+    (``gm_pileup.expected_histogram``; the pixel armed at the window's start as the background's
+    renewal process leaves it)."""
+    scene, rx = result.scene, result.receiver
+    gm = scene.gm
+    element_t, element_pe = _element_pe(result, flat)
+    rate = np.asarray(rx.rate_hz[flat : flat + 1], dtype=np.float64)
+    armed = armed_probability(rate, k0 * gm.bin_s, gm.dead_time_s)
+    scale_s = result.echo.shape.tau_s / result.echo.shape.a
+    timing = gm_pileup.Timing(
+        scale_s=scale_s,
+        jitter_s=gm.jitter_s,
+        bin_s=gm.bin_s,
+        dead_time_s=gm.dead_time_s,
+        n_pulses=gm.pulses,
+    )
+    q, _ = gm_pileup.expected_histogram(
+        timing, element_t, element_pe, rate, np.array([k0]), k1 - k0, armed
+    )
+    return gm.pulses * q[0]
+
+
+def _arriving_counts(result: simcore.Result, w, flat: int, k: np.ndarray) -> np.ndarray:
     """Mean avalanches per bin over the frame without dead time or jitter: pulses x bin x
     (PDE x the echo's photon rate P_r(t) / (h nu) + the pixel's background and dark rate)."""
     scene, rx = result.scene, result.receiver

@@ -32,7 +32,7 @@ def stats_rows(summary: dict) -> list[dict]:
             "value": f"{summary['n_hit_pixels']:,d} of {summary['n_pixels']:,d}",
         },
         {"label": "Mean detection probability", "value": fmt(summary["p_detect_mean"], ".3f")},
-        {"label": "Median SNR", "value": fmt(summary["snr_median"], ".3g")},
+        {"label": _snr_label(summary), "value": fmt(summary["snr_median"], ".3g")},
         {
             "label": "Median range σ",
             "value": "–" if sigma is None else f"{sigma * 100:.3g} cm",
@@ -42,9 +42,18 @@ def stats_rows(summary: dict) -> list[dict]:
     ]
 
 
+def _is_gm(summary: dict) -> bool:
+    return summary.get("receiver_kind", "lm_apd") == "gm_apd"
+
+
+def _snr_label(summary: dict) -> str:
+    """The SNR row's name: a Geiger-mode frame's SNR is its counts', not one flash's."""
+    return "Median count SNR S/√(S+B) (frame)" if _is_gm(summary) else "Median SNR"
+
+
 def _receiver_rows(summary: dict) -> list[dict]:
     """The receiver, and for a Geiger-mode array its frame's photon figures."""
-    if summary.get("receiver_kind", "lm_apd") != "gm_apd":
+    if not _is_gm(summary):
         return [{"label": "Receiver", "value": "linear-mode APD array"}]
     figures = summary.get("noise_figures") or {}
     pulses = ((summary.get("scene") or {}).get("gm") or {}).get("pulses")
@@ -108,7 +117,9 @@ def snr_histogram(result: simcore.Result) -> dict:
     snr = np.asarray(result.receiver.snr, dtype=np.float64)
     snr = snr[np.isfinite(snr) & (snr > 0)]
     tnr = result.scene.timing.tnr
-    layout = base_layout("SNR (log scale)", "pixels", bargap=0.0, showlegend=False)
+    gm = result.scene.receiver.kind == "gm_apd"
+    title = "count SNR S/√(S+B) (log scale)" if gm else "SNR (log scale)"
+    layout = base_layout(title, "pixels", bargap=0.0, showlegend=False)
     layout["margin"] = {"l": 48, "r": 8, "t": 8, "b": 38}
     if snr.size == 0:
         layout["annotations"] = [note("No echo")]
@@ -123,6 +134,17 @@ def snr_histogram(result: simcore.Result) -> dict:
         tickvals=ticks.tolist(),
         ticktext=[f"{10.0**k:g}" for k in ticks],
     )
+    centres = (edges[:-1] + edges[1:]) / 2
+    bars = {
+        "type": "bar",
+        "x": centres.tolist(),
+        "y": counts.tolist(),
+        "marker": {"color": "#5c6bc0"},
+        "customdata": (10**centres).tolist(),
+        "hovertemplate": "SNR ≈ %{customdata:.3g}: %{y} pixels<extra></extra>",
+    }
+    if gm:  # the threshold is in counts (from TNR's false-alarm rate), not on this axis
+        return {"data": [bars], "layout": layout}
     layout["shapes"] = [vline(math.log10(tnr), "#d62728")]
     layout["annotations"] = [
         {
@@ -137,13 +159,4 @@ def snr_histogram(result: simcore.Result) -> dict:
             "font": {"color": "#d62728", "size": 10},
         }
     ]
-    centres = (edges[:-1] + edges[1:]) / 2
-    bars = {
-        "type": "bar",
-        "x": centres.tolist(),
-        "y": counts.tolist(),
-        "marker": {"color": "#5c6bc0"},
-        "customdata": (10**centres).tolist(),
-        "hovertemplate": "SNR ≈ %{customdata:.3g}: %{y} pixels<extra></extra>",
-    }
     return {"data": [bars], "layout": layout}

@@ -8,7 +8,7 @@ import numpy as np
 
 import simcore
 from app.payloads import encode, photons
-from app.payloads.charts import base_layout, note, vline
+from app.payloads.charts import base_layout, note, range_axis, time_axis, vline
 from app.payloads.style import SELECTION_COLORS
 from simcore.constants import C as C_M_S
 
@@ -218,7 +218,38 @@ def waveform_figure(result: simcore.Result, selection: list) -> dict:
     layout["margin"]["t"] = 10 + 18 * math.ceil(len(data) and len(waves) / 2)
     layout["xaxis"]["tickformat"] = ",.0f"
     layout["xaxis"]["hoverformat"] = ",.2f"
+    if times:
+        lo_ns, hi_ns = min(times) * 1e9, max(times) * 1e9
+        time_axis(layout, lo_ns, hi_ns)
+        data.append(range_axis(layout, lo_ns, hi_ns))
+        layout["margin"]["t"] += 34
     return {"data": data, "layout": layout}
+
+
+# What the chart's caption and title say, by receiver kind (the page shows the frame's)
+VIEW_TEXT = {
+    "lm_apd": {
+        "waveform_title": "Echo waveforms of the selected pixels",
+        "waveform_caption": "solid: received (band-limited) · dotted: unfiltered · dashed: "
+        "emitted pulse delayed by 2R/c · ◆ half-maximum time · vertical line: detected range · "
+        "dash-dot: threshold (TNR × σn)",
+        "snr_caption": "SNR of the pixels with an echo (one flash; the red line: TNR)",
+    },
+    "gm_apd": {
+        "waveform_title": "Photon counts of the selected pixels",
+        "waveform_caption": "bars: avalanches counted per time bin over the frame's pulses · "
+        "solid step: the counts expected from the same pulses (dead time and jitter included) "
+        "· dotted: the photons arriving without dead time (right axis when larger): where "
+        "they part, pile-up · top axis: the range c t / 2",
+        "snr_caption": "Count SNR S / √(S + B) of the pixels with an echo (the frame's expected "
+        "counts in the peak window)",
+    },
+}
+
+
+def view_text(kind: str) -> dict[str, str]:
+    """The waveform chart's title and caption and the SNR chart's caption for a receiver."""
+    return VIEW_TEXT.get(kind, VIEW_TEXT["lm_apd"])
 
 
 def _background_traces(waves: list, tnr: float, times: list, scale: float) -> list[dict]:

@@ -197,13 +197,8 @@ def array_card() -> None:
 def waveform_card() -> None:
     with v3.VCard(classes="view-card waveform-card", elevation=1):
         with v3.VCardTitle(classes="card-title"):
-            html.Span("Echo waveforms of the selected pixels")
-        html.Div(
-            "solid: received (band-limited) · dotted: unfiltered · dashed: emitted pulse "
-            "delayed by 2R/c · ◆ half-maximum time · vertical line: detected range · "
-            "dash-dot: threshold",
-            classes="hint text-caption px-4",
-        )
+            html.Span("{{ view_text.waveform_title }}")
+        html.Div("{{ view_text.waveform_caption }}", classes="hint text-caption px-4")
         with html.Div(classes="chart-box waveform-box"):
             plotly.Figure(
                 state_variable_name="waveforms",
@@ -242,7 +237,7 @@ def stats_card() -> None:
                     "{{ row.ms }}",
                     ("['stat-value', row.cached ? 'text-disabled' : '']",),
                 )
-        html.Div("SNR of the pixels with an echo", classes="subtitle text-caption px-4 pt-1")
+        html.Div("{{ view_text.snr_caption }}", classes="subtitle text-caption px-4 pt-1")
         with html.Div(classes="chart-box snr-box"):
             plotly.Figure(
                 state_variable_name="snr_hist",

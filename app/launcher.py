@@ -5,22 +5,32 @@ a freshly opened page shows the last visitor's pose, and two tabs steer each oth
 gives each page load its own app process (``python -m app --shared`` on 127.0.0.1 and a free
 port) and proxies everything under ``/s/<session id>/`` to it:
 
-* ``GET /?token=T&<settings>`` (the printed address, or a shared link) checks the token (or its
-  cookie) as the app's door does, takes the warm spare process (started ahead, so the new tab
-  does not wait for a process to start) or starts one, and redirects to
-  ``/s/<id>/?token=T&<settings>``; the page applies the settings itself (app.ui.layout's
-  LINK_SCRIPT), and its copy-link button makes links to ``/``, so each student who opens one gets
-  a session of their own with the same scene;
+* the door, ``GET /?token=T&<settings>`` (the printed address, or a shared link), checks the token
+  (or its cookie) as the app's door does. Only a browser's navigation opens a session: a HEAD, a
+  prefetch or a subresource request (``Sec-Fetch-Mode`` other than ``navigate``, an ``<img>`` or
+  a ``fetch`` from another page, even one on another 127.0.0.1 port) starts nothing. A session is
+  bound to the browser that opened it: its id comes with a secret in an HttpOnly, SameSite=Strict
+  cookie scoped to ``/s/<id>/``, and its pages and websocket need that cookie (whoever reads the
+  id off a projected address bar cannot join). The door answers with a page that moves the tab
+  to ``/s/<id>/?<settings>#token=T`` (a same-site navigation, so the Strict cookie goes with it,
+  even when the link was opened from another site); the page keeps the token for its share
+  links and then shows only ``/`` in the address bar (app.ui.layout's LINK_SCRIPT), so a reload
+  or a shared link always opens a new session;
 * under ``/s/<id>/`` only GET and HEAD, and the websocket at ``/s/<id>/ws`` (trame's page builds
   it from its own path), are passed to that session's process, with the process's own private
   token (given on its stdin, never on a command line) and origin; the websocket's ``Origin`` and
-  the launcher's token are checked first, and frames are limited to wslink's chunk size (the
+  the session's cookie are checked first, and frames are limited to wslink's chunk size (the
   process reassembles messages within ``app.security``'s limits and screens every call);
 * an unknown or ended session gets a page saying so, with a link that starts a new one; over the
-  caps (``Caps``: sessions, the processes' total memory) a 503 page says how many are open;
-* a session whose websocket has been closed for ``idle_s`` (a reload reconnects well within it)
-  is stopped; a process that dies is noticed and forgotten; SIGINT or SIGTERM stops every child,
-  and a child whose launcher vanishes (even by SIGKILL) stops when its stdin closes.
+  caps (``Caps``: sessions, the processes' total memory, sessions per browser and per address) a
+  503 page says how many are open;
+* a session ends when its websocket has been closed for ``idle_s`` (a reload reconnects well
+  within it), when its page has sent nothing for ``input_idle_s`` (even with its socket held
+  open), or at ``max_age_s``; its page then says "session ended: reload for a new one". A
+  process that dies is noticed and forgotten; SIGINT or SIGTERM stops every child, and a child
+  whose launcher vanishes (even by SIGKILL) stops when its stdin closes;
+* connections (app.connections): idle or partial ones are closed after 10 s, each address holds
+  at most a few hundred, and refusals are logged one short line each, never with the token.
 """
 
 from __future__ import annotations
@@ -28,7 +38,9 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import dataclasses
+import hmac
 import html
+import json
 import logging
 import os
 import re
@@ -43,7 +55,7 @@ import aiohttp
 import psutil
 from aiohttp import web
 
-from app import security
+from app import connections, security
 
 log = logging.getLogger(__name__)
 
@@ -55,6 +67,9 @@ SESSION_RSS_BYTES = 370 * MIB
 MAX_DEFAULT_SESSIONS = 8
 MEMORY_SHARE = 0.75  # of the memory available at start, for the children together
 FRAME_BYTES = security.WS_CHUNK_BYTES + 4096  # one websocket frame: a wslink chunk and its header
+CLIENT_ID = re.compile(r"^[A-Za-z0-9_-]{16,64}$")
+SESSION_ENDED = 4000  # the websocket close code of an ended session (the page says so)
+NO_STORE = {"Cache-Control": "no-store"}
 SESSION_ID = re.compile(r"^/s/(?P<id>[A-Za-z0-9_-]{1,64})(?P<rest>/.*)?$")
 ADDRESS_LINE = re.compile(r"^lmapd-sim app: http://127\.0\.0\.1:(?P<port>\d+)/")
 CHILD_HOST = "127.0.0.1"
@@ -75,10 +90,17 @@ class Caps:
     """The launcher's limits.
 
     max_sessions : sessions open at once; the warm spare counts too (at most this many processes)
-    memory_cap_bytes : the children's total resident memory above which no session starts [bytes]
+    memory_cap_bytes : the children's total memory that no new session may take beyond [bytes]
     idle_s : a session whose websocket has been closed this long is stopped [s]
     spare : keep one process started ahead
     start_timeout_s : a process that has not listened after this long is given up [s]
+    input_idle_s : a session whose page has sent nothing this long is stopped, socket or not [s]
+    max_age_s : a session this old is stopped [s]
+    per_client : sessions of one browser (its client cookie); a new one ends its oldest
+    per_address : sessions of one client address other than loopback (a reverse proxy on this
+        machine is loopback) [0: no limit]
+    sockets_per_session : websockets open at once on one session
+    session_bytes : what a session is counted at in the memory cap until it measures more [bytes]
     """
 
     max_sessions: int
@@ -86,6 +108,12 @@ class Caps:
     idle_s: float = 60.0
     spare: bool = True
     start_timeout_s: float = 120.0
+    input_idle_s: float = 1800.0
+    max_age_s: float = 8 * 3600.0
+    per_client: int = 3
+    per_address: int = 6
+    sockets_per_session: int = 4
+    session_bytes: int = SESSION_RSS_BYTES
 
 
 def default_caps(
@@ -95,10 +123,11 @@ def default_caps(
     memory_cap_bytes: int | None = None,
     idle_s: float = 60.0,
     spare: bool = True,
+    **more,
 ) -> Caps:
     """The caps for this machine: the children may use ``MEMORY_SHARE`` of the memory available
     now [bytes], and as many sessions as fit in it at ``session_rss_bytes`` each (at least 1, at
-    most ``MAX_DEFAULT_SESSIONS``); explicit values win."""
+    most ``MAX_DEFAULT_SESSIONS``); explicit values win; ``more``: the other fields of Caps."""
     if available_bytes is None:
         available_bytes = int(psutil.virtual_memory().available)
     if memory_cap_bytes is None:
@@ -106,7 +135,14 @@ def default_caps(
     if max_sessions is None:
         fits = memory_cap_bytes // max(1, session_rss_bytes)
         max_sessions = int(min(MAX_DEFAULT_SESSIONS, max(1, fits)))
-    return Caps(max(1, max_sessions), max(0, memory_cap_bytes), idle_s, spare)
+    return Caps(
+        max(1, max_sessions),
+        max(0, memory_cap_bytes),
+        idle_s,
+        spare,
+        session_bytes=session_rss_bytes,
+        **more,
+    )
 
 
 class StartFailed(Exception):
@@ -115,7 +151,8 @@ class StartFailed(Exception):
 
 @dataclasses.dataclass(eq=False)
 class Child:
-    """One app process: its port on 127.0.0.1, its private token and its open websockets."""
+    """One app process: its port on 127.0.0.1, its private token and its open websockets; once
+    it serves a session, that session's cookie secret, its browser and its client address."""
 
     proc: asyncio.subprocess.Process
     port: int
@@ -124,6 +161,12 @@ class Child:
     n_sockets: int = 0
     idle_since_s: float = 0.0
     drain: asyncio.Task | None = None
+    secret: str = ""
+    client: str = ""
+    address: str = ""
+    opened_s: float = 0.0
+    last_input_s: float = 0.0
+    pages: set = dataclasses.field(default_factory=set)  # the open page websockets
 
     @property
     def pid(self) -> int:
@@ -221,6 +264,10 @@ class Launcher:
         self.spare: asyncio.Task | None = None
         self.n_starting = 0  # sessions being created (counted against the cap)
         self.n_refused = 0
+        self.n_not_navigation = 0  # door requests that were no navigation (no session)
+        self.n_foreign = 0  # session requests without that session's cookie
+        self.log = connections.ShortLog(log)
+        self.guard = connections.ConnectionGuard()
         self.n_reaped = 0
         self.n_start_failures = 0
         self._lock = asyncio.Lock()
@@ -231,7 +278,7 @@ class Launcher:
 
     # -- the application -----------------------------------------------------------------------
     def web_app(self) -> web.Application:
-        web_app = web.Application(client_max_size=64 * 1024)
+        web_app = web.Application(client_max_size=64 * 1024, middlewares=[self.guard.middleware])
         web_app.router.add_route("*", "/{tail:.*}", self.handle)
         web_app.on_startup.append(self._on_startup)
         web_app.on_cleanup.append(self._on_cleanup)
@@ -249,35 +296,59 @@ class Launcher:
 
     # -- requests ------------------------------------------------------------------------------
     async def handle(self, request: web.Request) -> web.StreamResponse:
-        authorised, from_address = self.door.token_ok(request)
         websocket = request.headers.get("Upgrade", "").lower() == "websocket"
+        path = request.path
+        if request.method not in ("GET", "HEAD"):
+            self.log.warning("method", "refused a %s request from %s", "non-GET", request.remote)
+            return web.Response(status=405, text="Method not allowed\n")
+        found = SESSION_ID.match(path)
+        if found:  # a session's own cookie lets in, not the token
+            return await self.in_session(request, found, websocket)
+        authorised, from_address = self.door.token_ok(request)
         if not authorised:
             self.door.n_refused += 1
+            self.log.warning("token", "refused a request without the token from %s", request.remote)
             return web.Response(
                 status=403,
                 text="Forbidden: open the address that `lmapd app` printed (it carries the "
                 "access token).\n",
             )
-        if request.method not in ("GET", "HEAD"):
-            return web.Response(status=405, text="Method not allowed\n")
-        path = request.path
-        if path in ("/", "/index.html") and not websocket:
-            response = await self.new_session(request)
-        else:
-            response = await self.in_session(request, path, websocket)
-        if from_address and not websocket and not response.prepared:
+        if path not in ("/", "/index.html") or websocket:
+            return web.Response(status=404, text="Not found\n")
+        response = await self.new_session(request)
+        if from_address and not response.prepared:
             response.set_cookie(
                 self.door.cookie_name(request), self.token, httponly=True, samesite="Strict"
             )
         return response
 
     async def new_session(self, request: web.Request) -> web.StreamResponse:
-        """Start a session (the spare process if one is ready) and send the page to it."""
-        problem = self.over_caps()
+        """Start a session for a browser's navigation (the spare process if one is ready) and
+        send the tab to it; anything else (HEAD, a prefetch, a subresource) starts nothing."""
+        if request.method == "HEAD":
+            return web.Response(status=200, content_type="text/html", headers=NO_STORE)
+        problem = navigation_problem(request.headers)
+        if problem is not None:
+            self.n_not_navigation += 1
+            self.log.warning("navigation", "no session for %s: %s", request.remote, problem)
+            return message_page(
+                403,
+                "Open this address in a browser tab",
+                "A session starts only when this address is opened in a tab of its own (not "
+                "from another page's image, script or prefetch).",
+                self._root_link(request),
+                "Open it here",
+            )
+        client = request.cookies.get(self._client_cookie(request), "")
+        if not CLIENT_ID.match(client):
+            client = secrets.token_urlsafe(16)
+        address = request.remote or ""
+        problem = self.over_caps(address)
         if problem:
             return self.refuse(request, problem)
         self.n_starting += 1
         try:
+            await self._make_room_for(client)
             child = await self._take_child()
         except StartFailed as exc:
             log.error("a session's process did not start: %s", exc)
@@ -292,32 +363,64 @@ class Launcher:
         finally:
             self.n_starting -= 1
         session_id = secrets.token_urlsafe(16)
-        child.idle_since_s = time.monotonic()
+        now = time.monotonic()
+        child.secret = secrets.token_urlsafe(32)
+        child.client, child.address = client, address
+        child.idle_since_s = child.opened_s = child.last_input_s = now
         self.sessions[session_id] = child
         self._ensure_spare()
         log.info("session %s: process %d on port %d", session_id[:6], child.pid, child.port)
-        query = request.query_string
-        return _redirect(f"/s/{session_id}/" + (f"?{query}" if query else ""))
+        settings = [(k, v) for k, v in request.query.items() if k != "token"]
+        target = f"/s/{session_id}/" + ("?" + _query(settings) if settings else "")
+        response = move_page(f"{target}#token={_q(self.token)}")
+        response.set_cookie(
+            session_cookie(session_id),
+            child.secret,
+            path=f"/s/{session_id}/",
+            httponly=True,
+            samesite="Strict",
+            max_age=int(self.caps.max_age_s) + 60,
+        )
+        response.set_cookie(
+            self._client_cookie(request), client, httponly=True, samesite="Strict", path="/"
+        )
+        return response
 
-    def over_caps(self) -> str | None:
-        """Why no session may start now, or None."""
+    def _client_cookie(self, request: web.Request) -> str:
+        return f"lmapd-client-{security._local_port(request)}"
+
+    async def _make_room_for(self, client: str) -> None:
+        """A browser at its ``per_client`` sessions gives up its least recently used ones."""
+        mine = [(c.last_input_s, sid) for sid, c in self.sessions.items() if c.client == client]
+        mine.sort()
+        while len(mine) >= max(1, self.caps.per_client):
+            _, session_id = mine.pop(0)
+            await self.end_session(session_id, "its browser opened another")
+
+    def over_caps(self, address: str = "") -> str | None:
+        """Why no session may start now for a client at ``address``, or None."""
         n_open = len(self.sessions) + self.n_starting
         if n_open >= self.caps.max_sessions:
             return (
                 f"{_open(n_open)}, the most this server allows "
                 f"(--max-sessions {self.caps.max_sessions})."
             )
-        used = self.children_rss_bytes()
-        if used >= self.caps.memory_cap_bytes:
+        used = self.children_bytes() + self.n_starting * self.caps.session_bytes
+        if used + self.caps.session_bytes > self.caps.memory_cap_bytes:
             return (
-                f"{_open(n_open)} and use {used / MIB:,.0f} MB, the most this server "
-                f"allows ({self.caps.memory_cap_bytes / MIB:,.0f} MB)."
+                f"{_open(n_open)} and use {used / MIB:,.0f} MB; another would pass the most this "
+                f"server allows ({self.caps.memory_cap_bytes / MIB:,.0f} MB)."
             )
+        limit = self.caps.per_address
+        if limit and address and address not in security.LOOPBACK_NAMES:
+            n_mine = sum(1 for c in self.sessions.values() if c.address == address)
+            if n_mine >= limit:
+                return f"Your computer has {n_mine} sessions open, the most it may have."
         return None
 
     def refuse(self, request: web.Request, problem: str) -> web.Response:
         self.n_refused += 1
-        log.warning("refused a new session: %s", problem)
+        self.log.warning("caps", "refused a new session: %s", problem)
         idle = f"{self.caps.idle_s:g}"
         return message_page(
             503,
@@ -333,14 +436,14 @@ class Launcher:
     def _root_link(request: web.Request) -> str:
         """The launcher's root with the request's settings (its token stays in the cookie)."""
         query = [(k, v) for k, v in request.query.items() if k != "token"]
-        return "/" + ("?" + "&".join(f"{_q(k)}={_q(v)}" for k, v in query) if query else "")
+        return "/" + ("?" + _query(query) if query else "")
 
-    async def in_session(self, request: web.Request, path: str, websocket: bool):
-        found = SESSION_ID.match(path)
-        child = self.sessions.get(found["id"]) if found else None
+    async def in_session(self, request: web.Request, found: re.Match, websocket: bool):
+        session_id = found["id"]
+        child = self.sessions.get(session_id)
         if child is None or not child.alive:
-            if found and child is not None:
-                self._forget(found["id"])
+            if child is not None:
+                self._forget(session_id)
             return message_page(
                 404,
                 "No such session",
@@ -349,10 +452,22 @@ class Launcher:
                 self._root_link(request),
                 "Start a new session",
             )
+        given = request.cookies.get(session_cookie(session_id), "")
+        if not (given and hmac.compare_digest(given.encode(), child.secret.encode())):
+            self.n_foreign += 1
+            self.log.warning("foreign", "refused a request for another browser's session")
+            return message_page(
+                403,
+                "This session is another tab's",
+                "Each session belongs to the browser tab that opened it. Open the address "
+                "that `lmapd app` printed to start a session of your own.",
+                "/",
+                "Start a session of your own",
+            )
         rest = found["rest"]
         if rest is None:  # /s/<id> -> /s/<id>/ (the page's relative addresses need the slash)
             query = request.query_string
-            return _redirect(f"/s/{found['id']}/" + (f"?{query}" if query else ""))
+            return _redirect(f"/s/{session_id}/" + (f"?{query}" if query else ""))
         if not safe_rest(rest):
             return web.Response(status=404, text="Not found\n")
         if websocket:
@@ -362,7 +477,7 @@ class Launcher:
         return await self.proxy_http(request, child, rest)
 
     async def proxy_http(self, request: web.Request, child: Child, rest: str) -> web.Response:
-        query = [(k, v) for k, v in request.query.items()]
+        query = [(k, v) for k, v in request.query.items() if k != "token"]
         url = f"{child.origin}{_path(rest)}"
         headers = {"Cookie": child.cookie}
         if "Accept-Encoding" in request.headers:
@@ -381,26 +496,31 @@ class Launcher:
     async def proxy_websocket(self, request: web.Request, child: Child) -> web.StreamResponse:
         problem = self.door.origin_problem(request)
         if problem is not None:
-            log.warning("refused a websocket from %s: %s", request.remote, problem)
+            self.log.warning("origin", "refused a websocket from %s: %s", request.remote, problem)
             self.door.n_refused += 1
             return web.Response(status=403, text="Forbidden\n")
-        try:
-            upstream = await self._client.ws_connect(
-                f"{child.origin}{security.WS_PATH}",
-                headers={"Origin": child.origin, "Cookie": child.cookie},
-                max_msg_size=FRAME_BYTES,
-                compress=0,
-                autoping=True,
-            )
-        except (aiohttp.ClientError, OSError) as exc:
-            log.warning("session process %d refused its websocket: %s", child.pid, exc)
-            return web.Response(status=502, text="The session's process did not answer\n")
-        page = web.WebSocketResponse(max_msg_size=FRAME_BYTES, heartbeat=30.0)
+        if child.n_sockets >= self.caps.sockets_per_session:
+            self.log.warning("sockets", "refused a websocket: the session has %d", child.n_sockets)
+            return web.Response(status=503, text="Too many connections\n")
         child.n_sockets += 1
+        page = web.WebSocketResponse(max_msg_size=FRAME_BYTES, heartbeat=30.0)
+        upstream = None
         try:
+            try:
+                upstream = await self._client.ws_connect(
+                    f"{child.origin}{security.WS_PATH}",
+                    headers={"Origin": child.origin, "Cookie": child.cookie},
+                    max_msg_size=FRAME_BYTES,
+                    compress=0,
+                    autoping=True,
+                )
+            except (aiohttp.ClientError, OSError) as exc:
+                log.warning("session process %d refused its websocket: %s", child.pid, exc)
+                return web.Response(status=502, text="The session's process did not answer\n")
             await page.prepare(request)
+            child.pages.add(page)
             tasks = [
-                asyncio.create_task(_pump(page, upstream)),
+                asyncio.create_task(_pump(page, upstream, child)),
                 asyncio.create_task(_pump(upstream, page)),
             ]
             _, pending = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
@@ -409,9 +529,12 @@ class Launcher:
             await asyncio.gather(*pending, return_exceptions=True)
         finally:
             child.n_sockets -= 1
+            child.pages.discard(page)
             child.idle_since_s = time.monotonic()
-            await upstream.close()
-            await page.close()
+            if upstream is not None:
+                await upstream.close()
+            if page.prepared:
+                await page.close()
         return page
 
     # -- children ------------------------------------------------------------------------------
@@ -470,7 +593,7 @@ class Launcher:
             return
         if len(self.sessions) + self.n_starting + 1 > self.caps.max_sessions:
             return
-        if self.children_rss_bytes() + SESSION_RSS_BYTES > self.caps.memory_cap_bytes:
+        if self.children_bytes() + self.caps.session_bytes > self.caps.memory_cap_bytes:
             return
         self.spare = asyncio.create_task(self.start_child())
         self.spare.add_done_callback(_quiet)
@@ -478,6 +601,12 @@ class Launcher:
     def children_rss_bytes(self) -> int:
         """The children's total resident memory [bytes]."""
         return sum(child.rss_bytes() for child in self._all)
+
+    def children_bytes(self) -> int:
+        """What the sessions' processes count in the memory cap [bytes]: each at least
+        ``caps.session_bytes`` (a process still starting has not yet grown to its size)."""
+        floor = self.caps.session_bytes
+        return sum(max(floor, child.rss_bytes()) for child in self.sessions.values())
 
     async def stop_child(self, child: Child, wait_s: float = 10.0) -> None:
         """Stop one process: SIGTERM, then SIGKILL after ``wait_s``."""
@@ -500,9 +629,33 @@ class Launcher:
     def _forget(self, session_id: str) -> Child | None:
         return self.sessions.pop(session_id, None)
 
+    async def end_session(self, session_id: str, why: str) -> None:
+        """Stop a session: its pages are told (a websocket close that the page shows as "session
+        ended: reload for a new one"), then its process is stopped."""
+        child = self._forget(session_id)
+        if child is None:
+            return
+        log.info("session %s: ended, %s", session_id[:6], why)
+        self.n_reaped += 1
+        for page in list(child.pages):
+            with contextlib.suppress(Exception):
+                await page.close(code=SESSION_ENDED, message=b"session ended")
+        await self.stop_child(child)
+
+    def why_end(self, child: Child, now: float) -> str | None:
+        """Why a live session should end now, or None."""
+        caps = self.caps
+        if child.n_sockets == 0 and now - child.idle_since_s >= caps.idle_s:
+            return f"its page closed for {caps.idle_s:g} s"
+        if now - child.last_input_s >= caps.input_idle_s:
+            return f"no input from its page for {caps.input_idle_s:g} s"
+        if now - child.opened_s >= caps.max_age_s:
+            return f"open for {caps.max_age_s:g} s, the most allowed"
+        return None
+
     async def reap(self) -> None:
-        """Forget sessions whose process died, stop those idle for ``idle_s``, replace a dead
-        spare."""
+        """Forget sessions whose process died; end those idle (page closed, or no input even
+        with a socket open) or too old; replace a dead spare."""
         now = time.monotonic()
         for session_id, child in list(self.sessions.items()):
             if not child.alive:
@@ -510,11 +663,13 @@ class Launcher:
                 log.warning("session %s: its process exited (%s)", session_id[:6], code)
                 self._forget(session_id)
                 self._all.discard(child)
-            elif child.n_sockets == 0 and now - child.idle_since_s >= self.caps.idle_s:
-                log.info("session %s: idle for %.0f s, stopped", session_id[:6], self.caps.idle_s)
-                self._forget(session_id)
-                self.n_reaped += 1
-                await self.stop_child(child)
+                for page in list(child.pages):
+                    with contextlib.suppress(Exception):
+                        await page.close(code=SESSION_ENDED, message=b"session ended")
+                continue
+            why = self.why_end(child, now)
+            if why is not None:
+                await self.end_session(session_id, why)
         spare = self.spare
         if spare is not None and spare.done():
             if spare.exception() is not None or not spare.result().alive:
@@ -549,6 +704,46 @@ class Launcher:
             await self._client.close()
 
 
+def navigation_problem(headers) -> str | None:
+    """None if a request to the door is a browser's navigation of a tab (or comes from a client
+    that sends no fetch metadata, such as an older browser or a script), else why not: a
+    subresource (``<img>``, ``fetch``), a frame, or a prefetch."""
+    mode = headers.get("Sec-Fetch-Mode", "").lower()
+    if mode and mode != "navigate":
+        return f"a {security.echo(mode)} request, not a navigation"
+    dest = headers.get("Sec-Fetch-Dest", "").lower()
+    if dest and dest != "document":
+        return f"a request for a {security.echo(dest)}, not a page"
+    purpose = " ".join(headers.get(k, "") for k in ("Sec-Purpose", "Purpose", "X-Moz")).lower()
+    if "prefetch" in purpose or "prerender" in purpose or "preview" in purpose:
+        return "a prefetch"
+    return None
+
+
+def session_cookie(session_id: str) -> str:
+    """The name of the cookie that binds a session to its browser."""
+    return f"lmapd-session-{session_id}"
+
+
+def move_page(location: str) -> web.Response:
+    """A page that moves its tab to ``location`` (in place, so Back does not reopen the door).
+    A script's navigation is same-site, so the session's SameSite=Strict cookie is sent even
+    when the door was opened from a link on another site (a redirect would not send it)."""
+    target = html.escape(location, quote=True)
+    script = json.dumps(location).replace("<", "\\u003c")
+    body = (
+        "<!doctype html><html lang='en'><head><meta charset='utf-8'>"
+        "<title>lmapd-sim</title></head><body style='font-family: sans-serif'>"
+        f"<p><a class='launcher-link' href='{target}'>Open the simulator</a></p>"
+        f"<script>window.location.replace({script});</script></body></html>"
+    )
+    return web.Response(status=200, text=body, content_type="text/html", headers=NO_STORE)
+
+
+def _query(pairs) -> str:
+    return "&".join(f"{_q(k)}={_q(v)}" for k, v in pairs)
+
+
 def _open(n: int) -> str:
     return "1 session is open" if n == 1 else f"{n} sessions are open"
 
@@ -571,9 +766,12 @@ def _quiet(task: asyncio.Task) -> None:
         task.exception()
 
 
-async def _pump(source, sink) -> None:
-    """Pass one websocket's frames to another until either closes."""
+async def _pump(source, sink, child: Child | None = None) -> None:
+    """Pass one websocket's frames to another until either closes; frames from a page
+    (``child`` given) are its session's input."""
     async for msg in source:
+        if child is not None:
+            child.last_input_s = time.monotonic()
         if msg.type == aiohttp.WSMsgType.BINARY:
             await sink.send_bytes(msg.data)
         elif msg.type == aiohttp.WSMsgType.TEXT:
@@ -589,19 +787,23 @@ async def _drain(stream: asyncio.StreamReader) -> None:
 
 
 async def serve(launcher: Launcher, host: str, port: int, announce: Callable[[int], None]) -> None:
-    """Serve until SIGINT or SIGTERM; then stop every child."""
-    runner = web.AppRunner(launcher.web_app(), handle_signals=False, access_log=None)
+    """Serve until SIGINT or SIGTERM (behind the launcher's connection guard); then stop every
+    child."""
+    runner = web.AppRunner(
+        launcher.web_app(), handle_signals=False, access_log=None, keepalive_timeout=75.0
+    )
     await runner.setup()
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
+    listening = None
     try:
-        site = web.TCPSite(runner, host, port)
-        await site.start()
-        sockets = site._server.sockets if site._server else []  # the bound port
-        announce(int(sockets[0].getsockname()[1]) if sockets else port)
+        listening = await connections.listen(runner, launcher.guard, host, port)
+        announce(listening[2])
         await stop.wait()
     finally:
+        if listening is not None:
+            await connections.stop_listening(*listening[:2])
         await runner.cleanup()  # the launcher's on_cleanup stops the children
         await launcher.close()

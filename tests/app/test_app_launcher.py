@@ -13,7 +13,9 @@ import asyncio
 import concurrent.futures
 import contextlib
 import dataclasses
+import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -28,6 +30,7 @@ from aiohttp import web
 from support.hostile_client import Client
 from support.launch import app_process
 
+from app import connections
 from app import launcher as lau
 
 TOKEN = "launcher-test-token"
@@ -51,22 +54,49 @@ def run(coroutine_fn, *args):
 
 @contextlib.asynccontextmanager
 async def serving(the_caps: lau.Caps):
-    """A launcher with stand-in sessions on a free port: (launcher, base address, client)."""
+    """A launcher with stand-in sessions on a free port, behind its connection guard:
+    (launcher, base address, client)."""
     launcher = lau.Launcher(TOKEN, "127.0.0.1", the_caps, command=fake_command)
     runner = web.AppRunner(launcher.web_app(), access_log=None)
     await runner.setup()
-    site = web.TCPSite(runner, "127.0.0.1", 0)
-    await site.start()
-    port = site._server.sockets[0].getsockname()[1]
+    server, sweeper, port = await connections.listen(runner, launcher.guard, "127.0.0.1", 0)
     try:
-        async with aiohttp.ClientSession() as client:
+        async with aiohttp.ClientSession(cookie_jar=aiohttp.DummyCookieJar()) as client:
             yield launcher, f"http://127.0.0.1:{port}", client
     finally:
+        await connections.stop_listening(server, sweeper)
         await runner.cleanup()
 
 
 def cookie(base: str) -> dict[str, str]:
+    """The launcher's token cookie (what the printed address leaves in the browser)."""
     return {"Cookie": f"lmapd-token-{urllib.parse.urlsplit(base).port}={TOKEN}"}
+
+
+NAVIGATION = {"Sec-Fetch-Mode": "navigate", "Sec-Fetch-Dest": "document"}
+
+
+@dataclasses.dataclass(frozen=True)
+class Session:
+    """A session as its browser holds it: the address the door sends the tab to, and the
+    cookies the door set (the session's own, the browser's id)."""
+
+    location: str
+    cookies: dict[str, str]
+
+    @property
+    def path(self) -> str:  # /s/<id>/
+        return self.location.split("?")[0].split("#")[0]
+
+    @property
+    def id(self) -> str:
+        return self.path.split("/")[2]
+
+    def headers(self, base: str, *names: str) -> dict[str, str]:
+        """The Cookie header of this browser: the token's cookie and its own cookies."""
+        jar = {**self.cookies}
+        jar[f"lmapd-token-{urllib.parse.urlsplit(base).port}"] = TOKEN
+        return {"Cookie": "; ".join(f"{k}={v}" for k, v in jar.items())}
 
 
 async def get(client, url: str, **headers) -> tuple[int, str, dict]:
@@ -74,12 +104,23 @@ async def get(client, url: str, **headers) -> tuple[int, str, dict]:
         return answer.status, await answer.text(), dict(answer.headers)
 
 
-async def new_session(client, base: str, query: str = "") -> str:
-    status, _, headers = await get(client, f"{base}/?token={TOKEN}{query}")
-    assert status == 302, status
-    location = headers["Location"]
+async def open_door(client, base: str, query: str = "", **headers) -> tuple[int, str, dict]:
+    """GET the door as a tab's navigation: (status, page, the cookies it set)."""
+    url = f"{base}/?token={TOKEN}{query}"
+    async with client.get(url, allow_redirects=False, headers={**NAVIGATION, **headers}) as answer:
+        cookies = {k: m.value for k, m in answer.cookies.items()}
+        return answer.status, await answer.text(), cookies
+
+
+MOVE = re.compile(r"location\.replace\((\"[^\"]*\")\)")
+
+
+async def new_session(client, base: str, query: str = "", **headers) -> Session:
+    status, page, cookies = await open_door(client, base, query, **headers)
+    assert status == 200, status
+    location = json.loads(MOVE.search(page)[1])
     assert location.startswith("/s/")
-    return location
+    return Session(location, cookies)
 
 
 async def until(predicate, what: str) -> None:
@@ -141,23 +182,81 @@ def test_the_token_opens_a_session_of_its_own_and_its_page_is_proxied():
         async with serving(caps()) as (launcher, base, client):
             assert (await get(client, f"{base}/"))[0] == 403
             assert (await get(client, f"{base}/?token=wrong"))[0] == 403
-            status, _, headers = await get(client, f"{base}/?token={TOKEN}&pitch_deg=30")
-            assert status == 302 and "HttpOnly" in headers["Set-Cookie"]
-            first = headers["Location"]
-            assert first.endswith(f"/?token={TOKEN}&pitch_deg=30")
+            first = await new_session(client, base, "&pitch_deg=30")
+            assert first.location.endswith(f"/?pitch_deg=30#token={TOKEN}")  # token after '#'
+            assert first.cookies[f"lmapd-session-{first.id}"]
             second = await new_session(client, base)
-            assert first.split("/")[2] != second.split("/")[2] and len(launcher.sessions) == 2
+            assert first.id != second.id and len(launcher.sessions) == 2
             assert len({c.port for c in launcher.sessions.values()}) == 2
             # the session's page: through the launcher, with the session's own token
-            status, text, _ = await get(client, f"{base}{first}")
+            status, text, _ = await get(
+                client, f"{base}{first.path}?pitch_deg=30", **first.headers(base)
+            )
             assert status == 200 and "token ok" in text and "pitch_deg=30" in text
-            status, text, _ = await get(client, f"{base}{first.split('?')[0]}x.js", **cookie(base))
+            status, text, _ = await get(client, f"{base}{first.path}x.js", **first.headers(base))
             assert (status, text.split(";")[1]) == (200, " token ok")
-            assert (await get(client, base + first.split("?")[0]))[0] == 403  # no token
-            status, _, headers = await get(client, f"{base}{first.split('/?')[0]}", **cookie(base))
+            status, _, headers = await get(
+                client, f"{base}{first.path[:-1]}", **first.headers(base)
+            )
             assert status == 302 and headers["Location"].endswith("/")
-            async with client.post(f"{base}{first}", data=b"x") as answer:
+            async with client.post(f"{base}{first.path}", data=b"x") as answer:
                 assert answer.status == 405
+
+    run(body)
+
+
+def test_a_session_is_bound_to_the_browser_that_opened_it():
+    """Whoever reads a session's address (the token and the id, off a projector) but lacks the
+    cookie that came with it can neither load its pages nor open its websocket."""
+
+    async def body():
+        async with serving(caps()) as (launcher, base, client):
+            teacher = await new_session(client, base)
+            student = await new_session(client, base)
+            for headers in (cookie(base), student.headers(base), {}):
+                status, text, _ = await get(client, f"{base}{teacher.path}", **headers)
+                assert status == 403 and "token ok" not in text
+                status, _, _ = await get(client, f"{base}{teacher.path}?token={TOKEN}", **headers)
+                assert status == 403
+                with pytest.raises(aiohttp.WSServerHandshakeError) as refused:
+                    await client.ws_connect(
+                        f"ws://{base[7:]}{teacher.path}ws?token={TOKEN}",
+                        headers={"Origin": base, **headers},
+                    )
+                assert refused.value.status == 403
+            assert launcher.sessions[teacher.id].n_sockets == 0
+            status, text, _ = await get(client, f"{base}{teacher.path}", **teacher.headers(base))
+            assert status == 200 and "token ok" in text
+            ws = await client.ws_connect(
+                f"ws://{base[7:]}{teacher.path}ws",
+                headers={"Origin": base, **teacher.headers(base)},
+            )
+            await ws.close()
+
+    run(body)
+
+
+@pytest.mark.parametrize(
+    "headers",
+    [
+        {"Sec-Fetch-Mode": "no-cors", "Sec-Fetch-Dest": "image"},  # <img src=...>
+        {"Sec-Fetch-Mode": "cors", "Sec-Fetch-Dest": "empty"},  # fetch() from another page
+        {"Sec-Fetch-Mode": "navigate", "Sec-Fetch-Dest": "iframe"},  # a frame in another page
+        {"Sec-Fetch-Mode": "navigate", "Sec-Purpose": "prefetch"},  # a link prefetch
+        {"Purpose": "prefetch"},
+    ],
+)
+def test_only_a_tabs_navigation_starts_a_session(headers):
+    async def body():
+        async with serving(caps(spare=False)) as (launcher, base, client):
+            async with client.head(f"{base}/?token={TOKEN}", headers=NAVIGATION) as answer:
+                assert answer.status == 200  # a link preview: no session
+            url = f"{base}/?token={TOKEN}"
+            async with client.get(url, allow_redirects=False, headers=headers) as answer:
+                assert answer.status == 403 and "/s/" not in await answer.text()
+            assert not launcher.sessions and not launcher._all and launcher.n_not_navigation == 1
+            await new_session(client, base)  # the tab's own navigation
+            assert len(launcher.sessions) == 1
 
     run(body)
 
@@ -165,13 +264,14 @@ def test_the_token_opens_a_session_of_its_own_and_its_page_is_proxied():
 def test_an_unknown_session_or_a_path_out_of_it_gets_a_page_not_a_trace():
     async def body():
         async with serving(caps()) as (_, base, client):
-            session = (await new_session(client, base)).split("?")[0]
+            session = await new_session(client, base)
             status, text, _ = await get(client, f"{base}/s/nope/?pixels=32", **cookie(base))
             assert status == 404 and "No such session" in text
             assert "href='/?pixels=32'" in text and "Traceback" not in text
             for path in ("%2e%2e/%2e%2e/etc/passwd", "a/%2e%2e/%2e%2e/x", "..%5c..%5cx"):
-                url = aiohttp.client.URL(f"{base}{session}{path}", encoded=True)
-                async with client.get(url, allow_redirects=False, headers=cookie(base)) as answer:
+                url = aiohttp.client.URL(f"{base}{session.path}{path}", encoded=True)
+                headers = session.headers(base)
+                async with client.get(url, allow_redirects=False, headers=headers) as answer:
                     assert answer.status == 404, path
             assert (await get(client, f"{base}/etc/passwd", **cookie(base)))[0] == 404
 
@@ -183,13 +283,45 @@ def test_over_the_caps_a_503_page_says_how_many_sessions_are_open():
         async with serving(caps(max_sessions=2)) as (launcher, base, client):
             await new_session(client, base)
             await new_session(client, base)
-            status, text, _ = await get(client, f"{base}/?token={TOKEN}")
+            status, text, _ = await open_door(client, base)
             assert status == 503 and "2 sessions are open" in text and "--max-sessions" in text
             assert launcher.spare is None and len(launcher._all) == 2  # the spare counts
-        async with serving(caps(memory_cap_bytes=1, spare=False)) as (launcher, base, client):
+        one = caps(memory_cap_bytes=150 * lau.MIB, session_bytes=100 * lau.MIB, spare=False)
+        async with serving(one) as (launcher, base, client):
             await new_session(client, base)
-            status, text, _ = await get(client, f"{base}/?token={TOKEN}")
+            status, text, _ = await open_door(client, base)
             assert status == 503 and "1 session is open and use" in text and "MB" in text
+
+    run(body)
+
+
+def test_a_burst_of_page_loads_counts_starting_sessions_at_their_size():
+    """Five tabs opened at once under a cap that fits two sessions start two: a process that
+    is still starting counts at a session's measured size, not at the little it uses yet."""
+
+    async def body():
+        two = caps(max_sessions=10, memory_cap_bytes=250 * lau.MIB, session_bytes=100 * lau.MIB)
+        async with serving(dataclasses.replace(two, spare=False)) as (launcher, base, client):
+            answers = await asyncio.gather(*(open_door(client, base) for _ in range(5)))
+            statuses = sorted(a[0] for a in answers)
+            assert statuses == [200, 200, 503, 503, 503]
+            assert len(launcher.sessions) == 2 and len(launcher._all) == 2
+
+    run(body)
+
+
+def test_a_browser_holds_at_most_its_share_of_sessions():
+    async def body():
+        the_caps = caps(max_sessions=6, per_client=2, spare=False)
+        async with serving(the_caps) as (launcher, base, client):
+            first = await new_session(client, base)
+            name = f"lmapd-client-{urllib.parse.urlsplit(base).port}"
+            browser = {"Cookie": f"{name}={first.cookies[name]}"}
+            opened = [first] + [await new_session(client, base, **browser) for _ in range(3)]
+            assert len(launcher.sessions) == 2  # the oldest two ended
+            assert set(launcher.sessions) == {s.id for s in opened[-2:]}
+            other = await new_session(client, base)  # another browser
+            assert len(launcher.sessions) == 3 and other.id in launcher.sessions
 
     run(body)
 
@@ -199,8 +331,8 @@ def test_the_spare_is_taken_and_replaced():
         async with serving(caps()) as (launcher, base, client):
             await until(lambda: launcher.spare is not None and launcher.spare.done(), "a spare")
             spare = launcher.spare.result()
-            location = await new_session(client, base)
-            assert launcher.sessions[location.split("/")[2]] is spare
+            session = await new_session(client, base)
+            assert launcher.sessions[session.id] is spare
             await until(lambda: launcher.spare is not None, "the next spare")
 
     run(body)
@@ -209,15 +341,16 @@ def test_the_spare_is_taken_and_replaced():
 def test_the_websocket_is_proxied_with_its_origin_checked_and_its_frames_bounded():
     async def body():
         async with serving(caps()) as (launcher, base, client):
-            path = (await new_session(client, base)).split("?")[0]
-            url = f"ws://{base[7:]}{path}ws?token={TOKEN}"
+            session = await new_session(client, base)
+            url = f"ws://{base[7:]}{session.path}ws"
+            own = session.headers(base)
             for origin in ("http://evil.example", None):
-                headers = {"Origin": origin} if origin else {}
+                headers = {"Origin": origin, **own} if origin else own
                 with pytest.raises(aiohttp.WSServerHandshakeError) as refused:
                     await client.ws_connect(url, headers=headers)
                 assert refused.value.status == 403
-            child = launcher.sessions[path.split("/")[2]]
-            ws = await client.ws_connect(url, headers={"Origin": base}, max_msg_size=0)
+            child = launcher.sessions[session.id]
+            ws = await client.ws_connect(url, headers={"Origin": base, **own}, max_msg_size=0)
             await ws.send_bytes(b"hello")
             assert (await asyncio.wait_for(ws.receive(), WAIT_S)).data == b"hello"
             assert child.n_sockets == 1
@@ -228,10 +361,17 @@ def test_the_websocket_is_proxied_with_its_origin_checked_and_its_frames_bounded
             assert msg.type in closed
             await ws.close()
             await until(lambda: child.n_sockets == 0, "the proxy to close")
-            ws = await client.ws_connect(url, headers={"Origin": base})  # the session goes on
-            await ws.send_bytes(b"again")
-            assert (await asyncio.wait_for(ws.receive(), WAIT_S)).data == b"again"
-            await ws.close()
+            held = [
+                await client.ws_connect(url, headers={"Origin": base, **own})
+                for _ in range(launcher.caps.sockets_per_session)
+            ]
+            with pytest.raises(aiohttp.WSServerHandshakeError) as refused:  # one tab's share
+                await client.ws_connect(url, headers={"Origin": base, **own})
+            assert refused.value.status == 503
+            await held[0].send_bytes(b"again")  # the session goes on
+            assert (await asyncio.wait_for(held[0].receive(), WAIT_S)).data == b"again"
+            for ws in held:
+                await ws.close()
 
     run(body)
 
@@ -239,26 +379,59 @@ def test_the_websocket_is_proxied_with_its_origin_checked_and_its_frames_bounded
 def test_idle_sessions_end_and_dead_ones_are_forgotten_and_close_stops_all():
     async def body():
         async with serving(caps()) as (launcher, base, client):
-            idle = (await new_session(client, base)).split("?")[0]
-            kept = (await new_session(client, base)).split("?")[0]
-            dies = (await new_session(client, base)).split("?")[0]
+            idle = await new_session(client, base)
+            kept = await new_session(client, base)
+            dies = await new_session(client, base)
             ws = await client.ws_connect(
-                f"ws://{base[7:]}{kept}ws?token={TOKEN}", headers={"Origin": base}
+                f"ws://{base[7:]}{kept.path}ws", headers={"Origin": base, **kept.headers(base)}
             )
-            victim = launcher.sessions[dies.split("/")[2]]
-            idle_child = launcher.sessions[idle.split("/")[2]]
+            victim = launcher.sessions[dies.id]
+            idle_child = launcher.sessions[idle.id]
             launcher.caps = dataclasses.replace(launcher.caps, idle_s=0.3)  # from now on
             os.kill(victim.pid, signal.SIGKILL)
             await until(lambda: len(launcher.sessions) == 1, "the idle and the dead session")
             assert launcher.n_reaped == 1 and idle_child.proc.returncode is not None
-            status, text, _ = await get(client, f"{base}{idle}", **cookie(base))
+            status, text, _ = await get(client, f"{base}{idle.path}", **idle.headers(base))
             assert status == 404 and "No such session" in text
-            assert (await get(client, f"{base}{kept}", **cookie(base)))[0] == 200
+            assert (await get(client, f"{base}{kept.path}", **kept.headers(base)))[0] == 200
             await ws.close()
             await until(lambda: not launcher.sessions, "the closed page's session")
             await until(lambda: launcher.spare is not None and launcher.spare.done(), "a spare")
             pids = [c.pid for c in launcher._all]
         assert pids and not any(psutil.pid_exists(p) and _running(p) for p in pids)
+
+    run(body)
+
+
+def test_a_held_socket_does_not_keep_a_session_without_input_alive():
+    """A page that holds its websocket open but sends nothing is ended after the input idle
+    time (its page is told: close code 4000, "session ended"); one that sends goes on until the
+    maximum age."""
+
+    async def body():
+        the_caps = caps(input_idle_s=0.6, max_age_s=WAIT_S, spare=False)
+        async with serving(the_caps) as (launcher, base, client):
+            held = await new_session(client, base)
+            busy = await new_session(client, base)
+            sockets = [
+                await client.ws_connect(
+                    f"ws://{base[7:]}{s.path}ws", headers={"Origin": base, **s.headers(base)}
+                )
+                for s in (held, busy)
+            ]
+            deadline = time.monotonic() + WAIT_S
+            while held.id in launcher.sessions:  # the busy page sends input all along
+                assert time.monotonic() < deadline, "the held session was not ended"
+                await sockets[1].send_bytes(b"input")
+                await asyncio.wait_for(sockets[1].receive(), WAIT_S)
+                await asyncio.sleep(0.1)
+            msg = await asyncio.wait_for(sockets[0].receive(), WAIT_S)
+            assert msg.type == aiohttp.WSMsgType.CLOSE and msg.data == lau.SESSION_ENDED
+            assert busy.id in launcher.sessions
+            launcher.caps = dataclasses.replace(launcher.caps, max_age_s=0.2)
+            await until(lambda: busy.id not in launcher.sessions, "the old session to end")
+            for ws in sockets:
+                await ws.close()
 
     run(body)
 
@@ -282,12 +455,17 @@ def test_the_real_launcher_proxies_a_session_and_leaves_no_process_after_sigterm
 
         async def body():
             async with aiohttp.ClientSession() as client:
-                status, _, headers = await get(client, running.url + "&pixels=32")
-                assert status == 302
-                path = headers["Location"].split("?")[0]
+                url = running.url + "&pixels=32"
+                async with client.get(url, headers=NAVIGATION, allow_redirects=False) as answer:
+                    assert answer.status == 200
+                    jar = {k: m.value for k, m in answer.cookies.items()}
+                    path = json.loads(MOVE.search(await answer.text())[1]).split("?")[0]
                 ws = await client.ws_connect(
-                    f"ws://127.0.0.1:{running.port}{path}ws?token={running.token}",
-                    headers={"Origin": running.origin},
+                    f"ws://127.0.0.1:{running.port}{path}ws",
+                    headers={
+                        "Origin": running.origin,
+                        "Cookie": "; ".join(f"{k}={v}" for k, v in jar.items()),
+                    },
                     max_msg_size=0,
                 )
                 page = Client(ws)

@@ -157,7 +157,7 @@ def evaluate_designs(
 
 
 def _record(study, number, stage, preset, params, points: Sequence[PointOutcome], error):
-    figures = []
+    figures: list[dict[str, Any]] = []
     for o in points:
         if o.error is not None:
             error = error or o.error
@@ -198,6 +198,7 @@ def _distribution(v: Variable):
 
     if v.choices:
         return d.CategoricalDistribution(list(v.choices))
+    assert v.low is not None and v.high is not None  # a variable has bounds or choices
     if v.integer:
         return d.IntDistribution(int(v.low), int(v.high), log=v.log)
     return d.FloatDistribution(v.low, v.high, log=v.log)
@@ -215,6 +216,7 @@ def make_optuna_study(study: Study, n_trials: int):
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     # the samplers read each trial's constraints (Trial.set_constraint: feasible when <= 0)
+    sampler: optuna.samplers.BaseSampler
     if len(study.minimize) > 1:
         sampler = optuna.samplers.NSGAIISampler(
             population_size=max(10, min(50, n_trials // 4)), seed=study.seed
@@ -338,6 +340,7 @@ def polish(study: Study, best: Record, evaluator, state, out, cache) -> Record:
     energy, a larger aperture never hurt), so the bisection closes on the least feasible value."""
     current = best
     for v in polish_variables(study):
+        assert v.low is not None  # continuous: bounds
         lo, hi = v.low, float(current.params[v.key])
         if hi <= lo:
             continue

@@ -46,6 +46,7 @@ from typing import Any
 
 import numpy as np
 
+from .._assets import ASSETS_DIR
 from ..scene import (
     PRESETS,
     QUICK,
@@ -53,10 +54,11 @@ from ..scene import (
     Scene,
     SceneError,
     load_scene,
-    read_toml,
     with_overrides,
 )
+from ..tomlfile import read_toml_file
 
+STUDIES_DIR = ASSETS_DIR / "studies"
 STUDY_KEYS = (
     "name",
     "base",
@@ -216,10 +218,22 @@ def cost_figure(name: str, scene: Scene) -> float:
     return float(value)
 
 
+def builtin_studies() -> list[str]:
+    """The names of the built-in studies (``assets/studies/NAME.toml``, shipped in the package)."""
+    return sorted(p.stem for p in STUDIES_DIR.glob("*.toml"))
+
+
 def load_study(path: str | Path) -> Study:
-    """Read and check a study file (relative paths in it are relative to the file)."""
+    """Read and check a study file, or a built-in study by name (``mro_approach``); relative
+    paths in it are relative to the file."""
     path = Path(path)
-    data = read_toml(path, StudyError)
+    if not path.exists() and path.suffix == "" and str(path) in builtin_studies():
+        path = STUDIES_DIR / f"{path}.toml"
+    if not path.exists():
+        raise StudyError(
+            f"study file not found: {path} (built-in studies: {', '.join(builtin_studies())})"
+        )
+    data = read_toml_file(path, "study file", StudyError)
     return study_from_dict(data, source=str(path), base_dir=path.parent, text=path.read_text())
 
 
@@ -445,12 +459,13 @@ def _try(base: Scene, key: str, value, where: str) -> None:
 
 
 def _requirement(figure: str, spec, where: str) -> Requirement:
-    if not isinstance(spec, str) or not REQUIREMENT.match(spec):
+    match = REQUIREMENT.match(spec) if isinstance(spec, str) else None
+    if match is None:
         raise StudyError(
             f'{where} [requirements] {figure} = {spec!r}; write ">= 0.8", "<= 0.02 at p90" '
             "(at worst, median, mean or pNN)"
         )
-    op, bound_text, over = REQUIREMENT.match(spec).groups()
+    op, bound_text, over = match.groups()
     bound = float(bound_text)
     req = Requirement(figure=figure, op=op, bound=bound, over=over or "worst")
     if FRACTIONS.search(figure):

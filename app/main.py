@@ -19,7 +19,7 @@ from collections.abc import Callable
 from trame.app import get_server
 
 import simcore
-from app import security
+from app import connections, security
 from app.engine import Engine
 from app.logic import flyaround, parts, studies
 from app.logic.controller import AppLogic
@@ -118,10 +118,48 @@ def app_address(host: str, port: int, token: str) -> str:
     return f"http://{name}:{port}/?token={token}"
 
 
-def start_message(host: str, port: int, token: str) -> list[str]:
+def lan_addresses(host: str) -> list[str]:
+    """The addresses other machines can open when the server listens on every interface (``host``
+    0.0.0.0 or ::): this machine's IPv4 addresses (and global IPv6 ones for ::), loopback and
+    link-local ones left out."""
+    if host not in security.WILDCARD_HOSTS:
+        return []
+    import ipaddress  # noqa: PLC0415  (only on a wildcard host)
+    import socket  # noqa: PLC0415
+
+    import psutil  # noqa: PLC0415
+
+    families = (socket.AF_INET,) if host == "0.0.0.0" else (socket.AF_INET, socket.AF_INET6)
+    found = []
+    for addrs in psutil.net_if_addrs().values():
+        for addr in addrs:
+            if addr.family not in families:
+                continue
+            try:
+                ip = ipaddress.ip_address(addr.address.split("%")[0])
+            except ValueError:
+                continue
+            if ip.is_loopback or ip.is_link_local or ip.is_unspecified or ip.is_multicast:
+                continue
+            if str(ip) not in found:
+                found.append(str(ip))
+    return found
+
+
+def start_message(host: str, port: int, token: str, lan: list[str] | None = None) -> list[str]:
     """What the server prints once it listens: the address to open (on one line, with the access
-    token), and a warning if other machines can reach it (a --host other than loopback)."""
-    lines = [f"lmapd-sim app: {app_address(host, port, token)}  (Ctrl+C stops it)"]
+    token), and a warning if other machines can reach it (a --host other than loopback). On a
+    wildcard host (0.0.0.0) the first address is this machine's loopback one, then one line for
+    each of its LAN addresses (``lan``: found by :func:`lan_addresses` if None), which are what
+    other machines open."""
+    if host in security.WILDCARD_HOSTS:
+        lan = lan_addresses(host) if lan is None else lan
+        lines = [f"lmapd-sim app: {app_address('127.0.0.1', port, token)}  (Ctrl+C stops it)"]
+        lines += [f"lmapd-sim app: on the network: {app_address(ip, port, token)}" for ip in lan]
+        if not lan:
+            lines.append("lmapd-sim app: no network address found (only this machine can open it)")
+    else:
+        lines = [f"lmapd-sim app: {app_address(host, port, token)}  (Ctrl+C stops it)"]
     if host not in LOOPBACK_HOSTS:
         lines.append(
             f"lmapd-sim app: warning: listening on {host}, not only on this machine: anyone who "
@@ -177,6 +215,16 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="a session whose page has been closed this long ends (default 60 s)",
     )
     parser.add_argument(
+        "--input-idle-min",
+        type=float,
+        default=30.0,
+        help="a session whose page has sent nothing (no control moved) this long ends, even with "
+        "the page open (default 30 min)",
+    )
+    parser.add_argument(
+        "--max-age-h", type=float, default=8.0, help="a session ends this old (default 8 h)"
+    )
+    parser.add_argument(
         "--no-spare", action="store_true", help="start no process ahead of the next tab"
     )
     # a session's process (started by the launcher): its token is the first line of stdin,
@@ -217,6 +265,8 @@ def run_launcher(args: argparse.Namespace) -> int:
         memory_cap_bytes=None if args.memory_cap_mb is None else int(args.memory_cap_mb * mib),
         idle_s=max(0.0, args.idle_s),
         spare=not args.no_spare,
+        input_idle_s=max(1.0, 60.0 * args.input_idle_min),
+        max_age_s=max(1.0, 3600.0 * args.max_age_h),
     )
     try:
         scene = simcore.load_scene(args.scene)  # the sessions' scene, checked once here
@@ -236,7 +286,8 @@ def run_launcher(args: argparse.Namespace) -> int:
         print(
             f"lmapd-sim app: each tab its own session: at most {caps.max_sessions} at once, "
             f"{caps.memory_cap_bytes / mib:,.0f} MB for their processes, a closed page's session "
-            f"ends after {caps.idle_s:g} s (--shared: one scene for every tab)",
+            f"ends after {caps.idle_s:g} s, one without input after "
+            f"{caps.input_idle_s / 60:g} min (--shared: one scene for every tab)",
             flush=True,
         )
 
@@ -261,6 +312,8 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of ``lmapd app`` and ``python -m app``; returns the exit status."""
     args = parse_args(sys.argv[1:] if argv is None else argv)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    connections.shorten_server_logs()  # one line per malformed request, never the request
+    connections.raise_open_file_limit()  # idle sockets must not run a server out of files
     if not args.shared:
         return run_launcher(args)
     try:

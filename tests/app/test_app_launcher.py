@@ -16,7 +16,9 @@ import dataclasses
 import json
 import os
 import re
+import resource
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -509,3 +511,113 @@ def test_sessions_stop_when_their_launcher_is_killed(tmp_path):
             if proc.poll() is None:
                 proc.kill()
                 proc.wait()
+
+
+# -- connections and logs, the launcher in a process of its own ----------------------------------
+FAKE_LAUNCHER = Path(__file__).resolve().parents[1] / "support" / "fake_launcher.py"
+OPEN_FILES = 1024  # a common default soft limit
+
+
+@contextlib.contextmanager
+def launcher_process(tmp_path: Path, *args: str):
+    """The launcher with stand-in sessions in a process limited to 1,024 open files (soft and
+    hard): (its address with the token, its log file)."""
+
+    def limit() -> None:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (OPEN_FILES, OPEN_FILES))
+
+    log_path = tmp_path / "launcher.log"
+    with open(log_path, "wb") as log_file:
+        proc = subprocess.Popen(
+            [sys.executable, str(FAKE_LAUNCHER), *args],
+            stdout=subprocess.PIPE,
+            stderr=log_file,
+            preexec_fn=limit,
+        )
+        try:
+            line = proc.stdout.readline().decode()
+            assert line.startswith("lmapd-sim app: http://"), line
+            yield line.split()[-1], log_path
+        finally:
+            proc.terminate()
+            try:
+                proc.wait(timeout=WAIT_S)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+
+
+def test_a_thousand_half_open_connections_do_not_stop_a_page_load(tmp_path):
+    """Under a 1,024 open-file limit, 1,000 connections that never finish their request line do
+    not keep a tab from opening its session (idle ones are evicted over the per-address cap),
+    and the server closes them all after its idle time."""
+    connections.raise_open_file_limit()  # this process holds the client ends
+    n_sockets = min(1000, resource.getrlimit(resource.RLIMIT_NOFILE)[0] - 200)
+    if n_sockets < 500:
+        pytest.skip(f"this process may open only {n_sockets + 200} files")
+    with launcher_process(tmp_path, "--guard-idle-s", "3") as (url, log_path):
+        parts = urllib.parse.urlsplit(url)
+        half_open = []
+        try:
+            for _ in range(n_sockets):
+                s = socket.create_connection((parts.hostname, parts.port), timeout=WAIT_S)
+                s.sendall(f"GET /?{parts.query} HTTP/1.1\r\nHost: x\r\nX-Slow: ".encode())
+                half_open.append(s)
+
+            async def body():
+                async with aiohttp.ClientSession(cookie_jar=aiohttp.DummyCookieJar()) as client:
+                    token = urllib.parse.parse_qs(parts.query)["token"][0]
+                    door = f"{parts.scheme}://{parts.netloc}/?token={token}"
+                    async with client.get(door, headers=NAVIGATION) as answer:
+                        assert answer.status == 200
+                        jar = {k: m.value for k, m in answer.cookies.items()}
+                        location = json.loads(MOVE.search(await answer.text())[1])
+                    headers = {"Cookie": "; ".join(f"{k}={v}" for k, v in jar.items())}
+                    page = f"{parts.scheme}://{parts.netloc}{location.split('#')[0]}"
+                    async with client.get(page, headers=headers) as answer:
+                        return answer.status, await answer.text()
+
+            status, text = asyncio.run(asyncio.wait_for(body(), WAIT_S))
+            assert status == 200 and "token ok" in text
+            deadline = time.monotonic() + WAIT_S  # every half-open one is closed by the server
+            closed = sum(1 for s in half_open if _closed_by_peer(s, deadline))
+            assert closed == n_sockets
+        finally:
+            for s in half_open:
+                s.close()
+        log = log_path.read_text()
+        assert "Too many open files" not in log and "Traceback" not in log
+
+
+def _closed_by_peer(s: socket.socket, deadline: float) -> bool:
+    try:
+        s.settimeout(max(0.01, deadline - time.monotonic()))
+        return s.recv(1024) == b""
+    except ConnectionResetError:
+        return True
+    except TimeoutError:
+        return False
+
+
+def test_a_malformed_request_logs_one_short_line_without_the_token(tmp_path):
+    with launcher_process(tmp_path) as (url, log_path):
+        parts = urllib.parse.urlsplit(url)
+        token = urllib.parse.parse_qs(parts.query)["token"][0]
+        requests = [
+            f"GET /?token={token} HTTP/1.1\r\nHost: x\r\nContent-Length: nope\r\n\r\n",
+            f"GET /?token={token}\x01 HTTP/1.1\r\nHost: x\r\n\r\n",
+            f"GET /?token={token} HTTP/1.1\r\nHost: x\r\nBad Header\r\n\r\n",
+        ]
+        for request in requests:
+            with socket.create_connection((parts.hostname, parts.port), timeout=WAIT_S) as s:
+                s.sendall(request.encode())
+                s.settimeout(WAIT_S)
+                assert s.recv(1024).split(b"\r\n")[0].endswith(b" 400 Bad Request")
+        with socket.create_connection((parts.hostname, parts.port), timeout=WAIT_S) as s:
+            s.sendall(b"GET /?token=wrong HTTP/1.1\r\nHost: x\r\n\r\n")  # refused: one line
+            assert s.recv(1024).startswith(b"HTTP/1.1 403")
+    lines = log_path.read_text().splitlines()
+    assert token not in "\n".join(lines) and "Traceback" not in "\n".join(lines)
+    malformed = [line for line in lines if "malformed" in line]
+    assert len(malformed) == len(requests), lines
+    assert any("without the token" in line for line in lines) and len(lines) <= len(requests) + 1

@@ -91,9 +91,13 @@ def test_the_start_message_names_the_address_and_warns_off_loopback():
     assert start_message("127.0.0.1", 8080, "T0k-en_") == [
         "lmapd-sim app: http://127.0.0.1:8080/?token=T0k-en_  (Ctrl+C stops it)"
     ]
-    lines = start_message("0.0.0.0", 9000, "abc")
-    assert lines[0].startswith("lmapd-sim app: http://0.0.0.0:9000/?token=abc ")
-    assert "warning: listening on 0.0.0.0, not only on this machine" in lines[1]
+    lines = start_message("0.0.0.0", 9000, "abc", lan=["192.168.1.20", "10.0.0.5"])
+    assert lines[0].startswith("lmapd-sim app: http://127.0.0.1:9000/?token=abc ")
+    assert lines[1] == "lmapd-sim app: on the network: http://192.168.1.20:9000/?token=abc"
+    assert lines[2] == "lmapd-sim app: on the network: http://10.0.0.5:9000/?token=abc"
+    assert "warning: listening on 0.0.0.0, not only on this machine" in lines[3]
+    assert not any("0.0.0.0:" in line for line in lines)  # no address a student could not open
+    assert "no network address found" in start_message("0.0.0.0", 9000, "abc", lan=[])[1]
     assert start_message("::1", 8080, "abc")[0].startswith("lmapd-sim app: http://[::1]:8080/?")
 
 
@@ -511,3 +515,29 @@ def test_partial_messages_are_bounded_per_connection_in_total_and_in_time():
     with pytest.raises(Refused, match="undecodable"):
         one.process_chunk(_encode_header(4, 0, 1) + b"\xc1")
     assert budget.reserved_bytes == 0
+
+
+def test_the_lan_addresses_leave_out_loopback_and_link_local(monkeypatch):
+    import socket
+    from types import SimpleNamespace
+
+    import psutil
+
+    from app.main import lan_addresses
+
+    def addr(family, address):
+        return SimpleNamespace(family=family, address=address)
+
+    interfaces = {
+        "lo": [addr(socket.AF_INET, "127.0.0.1"), addr(socket.AF_INET6, "::1")],
+        "eth0": [
+            addr(socket.AF_INET, "192.168.1.20"),
+            addr(socket.AF_INET6, "fe80::1%eth0"),
+            addr(socket.AF_INET6, "2001:db8::5"),
+        ],
+        "wlan0": [addr(socket.AF_INET, "169.254.3.4"), addr(socket.AF_INET, "10.0.0.5")],
+    }
+    monkeypatch.setattr(psutil, "net_if_addrs", lambda: interfaces)
+    assert lan_addresses("0.0.0.0") == ["192.168.1.20", "10.0.0.5"]
+    assert lan_addresses("::") == ["192.168.1.20", "2001:db8::5", "10.0.0.5"]
+    assert lan_addresses("127.0.0.1") == []

@@ -78,7 +78,10 @@ class Detection:
         pixels (n,), values of the outliers (n_out,)); the cloud carries them besides its shared
         set (the Geiger-mode receiver's ``counts`` and ``signal_pe``)
     summary_figures : a receiver's own summary figures, dotted name (with unit) -> JSON value
-        (e.g. ``gm.saturated_pixel_fraction``); :meth:`simcore.result.Result.summary` adds them
+        (e.g. ``gm.saturated_pixel_fraction``); :meth:`simcore.result.Result.summary` adds them.
+        Both built-in receivers give ``n_false_points_expected``: the false points expected in
+        the cloud per frame, on the basis of the cloud's ``n_outliers``
+        (docs/physics.md#false-points)
     """
 
     p_detect: np.ndarray
@@ -94,7 +97,9 @@ class Detection:
 
     @property
     def n_false_expected(self) -> float:
-        """Expected false alarms of the whole array per flash (before the stops' limit) [1]."""
+        """Expected false alarms of the whole array per flash before the stops' limit (the
+        LM-APD's noise crossings), not the cloud's false points: those are the summary figure
+        ``n_false_points_expected`` [1]."""
         n = self.n_false_per_pixel
         return float(np.sum(n)) if isinstance(n, np.ndarray) else n
 

@@ -5,11 +5,13 @@ The expected histogram. Each lit pixel's echo elements (Eqs. 1, 29, 30) and cons
 its cumulative primary intensity Lambda(t) = sum_k N_k G((t - t_k) / s) + r t exactly
 (G(x) = 1 - (1 + x) e^-x); the pixel fires in a fine cell of time (half the jitter or the
 bin at most) with probability armed x (1 - e^-dLambda), armed = the share of pulses not within
-the dead time of an earlier avalanche (closed form, a0 (e^-Lambda_i - e^-Lambda_i+1), when the dead
-time outlasts the window: the first photon). Jitter then moves each avalanche (a convolution of
-the fine cells with the Gaussian), and the TDC sums the cells into bins: q_j, the expected
-avalanches per pulse in bin j, and alpha_j = 1 - (expected avalanches within the dead time before
-bin j), the share of pulses armed at bin j (the expectation of Coates' A_j / N).
+the dead time of an earlier avalanche: those armed when the window opens (a0), less those that
+fired within the dead time before, plus those that re-arm (a background avalanche d earlier,
+before the window: r a0 per unit time; with few pulses left armed after a bright echo's onset
+these few re-armed pulses carry Coates' largest estimates). Jitter then moves each avalanche (a
+convolution of the fine cells with the Gaussian), and the TDC sums the cells into bins: q_j, the
+expected avalanches per pulse in bin j, and alpha_j = 1 - (expected avalanches within the dead
+time before bin j), the share of pulses armed at bin j (the expectation of Coates' A_j / N).
 
 The Coates centroid at finite N. Coates' estimate of bin j is v_j = -ln(1 - n_j / A_j) less the
 background's r b, with A_j ~ Binomial(N, alpha_j) pulses armed and n_j | A_j ~ Binomial(A_j, h_j),
@@ -56,7 +58,7 @@ def _u_grid() -> np.ndarray:
 
 @lru_cache(maxsize=1)
 def _coates_table() -> np.ndarray:
-    """(3, A_TABLE + 1, U) mean, variance and covariance with n of f = -ln(1 - min(n, A - 1/2)
+    """(A_TABLE + 1, U, 3) mean, variance and covariance with n of f = -ln(1 - min(n, A - 1/2)
     / A), n ~ Binomial(A, h), h = 1 - e^-u on the u grid; A = 0 gives 0 (no armed pulse). The
     variance, not the second moment, is tabulated: every entry is then nearly linear in h where
     h is small, so the interpolation in u keeps it."""
@@ -79,6 +81,7 @@ def _coates_table() -> np.ndarray:
         out[0, a] = m1
         out[1, a] = np.maximum((p * (f - m1[None, :]) ** 2).sum(axis=0), 0.0)
         out[2, a] = (p * (f - m1[None, :]) * n).sum(axis=0)
+    out = np.ascontiguousarray(np.moveaxis(out, 0, -1))  # (A, U, 3): one gather per lookup
     out.setflags(write=False)
     return out
 
@@ -96,14 +99,19 @@ def _poisson_log_table() -> tuple[np.ndarray, ...]:
     return mu, l1, var, cov
 
 
-def _table_moments(a_int: np.ndarray, h: np.ndarray) -> np.ndarray:
-    """(3, ...) the tabulated mean, variance and covariance with n at integer A <= A_TABLE
-    (interpolated in u = -ln(1 - h))."""
-    tab = _coates_table()
+def _u_index(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The u grid's cell of each h and the weight of its upper node."""
     u = np.minimum(-np.log1p(-np.minimum(h, 1.0 - 1e-300)), U_MAX) / U_STEP
-    i = np.minimum(u.astype(np.intp), tab.shape[2] - 2)
-    w = u - i
-    return tab[:, a_int, i] * (1 - w) + tab[:, a_int, i + 1] * w
+    i = np.minimum(u.astype(np.intp), len(_u_grid()) - 2)
+    return i, u - i
+
+
+def _table_moments(a_int: np.ndarray, i: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """(3, ...) the tabulated mean, variance and covariance with n at integer A <= A_TABLE,
+    interpolated in u = -ln(1 - h) (cell i, weight w of :func:`_u_index`)."""
+    tab = _coates_table()
+    lo, hi = tab[a_int, i], tab[a_int, i + 1]
+    return np.moveaxis(lo + (hi - lo) * w[..., None], -1, 0)
 
 
 def _large_a_moments(a: np.ndarray, h: np.ndarray) -> np.ndarray:
@@ -136,10 +144,9 @@ def _moments_at(a: np.ndarray, h: np.ndarray) -> np.ndarray:
     small = a <= A_TABLE
     if small.any():
         lo = np.minimum(np.floor(a[small]).astype(np.intp), A_TABLE - 1)
-        w = a[small] - lo
-        out[:, small] = (
-            _table_moments(lo, h[small]) * (1 - w) + _table_moments(lo + 1, h[small]) * w
-        )
+        w = (a[small] - lo)[None]
+        i, wu = _u_index(h[small])
+        out[:, small] = _table_moments(lo, i, wu) * (1 - w) + _table_moments(lo + 1, i, wu) * w
     big = ~small
     if big.any():
         out[:, big] = _large_a_moments(a[big], h[big])
@@ -168,23 +175,26 @@ def coates_bin_moments(n_pulses: int, alpha: np.ndarray, h: np.ndarray) -> np.nd
         lo_mean = hi_mean
         if not len(sel):
             continue
-        k = np.arange(min(k_max, n_pulses) + 1)
-        al, hs = alpha[sel][:, None], h[sel][:, None]
+        k_top = min(k_max, n_pulses)
+        k = np.arange(k_top + 1)
+        log_choose = (
+            special.gammaln(n_pulses + 1)
+            - special.gammaln(k + 1)
+            - special.gammaln(n_pulses - k + 1)
+        )
+        al = alpha[sel]
         with np.errstate(divide="ignore"):
-            logp = (
-                special.gammaln(n_pulses + 1)
-                - special.gammaln(k + 1)
-                - special.gammaln(n_pulses - k + 1)
-                + special.xlogy(k, al)
-                + special.xlog1py(n_pulses - k, -al)
-            )
+            la, l1a = np.log(al)[:, None], np.log1p(-al)[:, None]
+        logp = log_choose[None, :] + np.where(k > 0, k * la, 0.0) + (n_pulses - k) * l1a
         p = np.exp(logp)
-        a_k = np.broadcast_to(k, p.shape).astype(float)
-        hb = np.broadcast_to(hs, p.shape)
-        m = _moments_at(a_k, hb)
-        m_next = _moments_at(a_k + 1.0, hb)[0]
-        out[:3, sel] = (p[None] * m).sum(axis=2)
-        out[3, sel] = (p * (m_next - m[0])).sum(axis=1)
+        # the moments at A = 0 .. k_top + 1 (integers: the table's own rows; A_TABLE >= 61)
+        i, wu = _u_index(h[sel])
+        a_all = np.arange(k_top + 2)
+        m = _table_moments(
+            a_all[None, :], i[:, None], np.broadcast_to(wu[:, None], (len(sel), k_top + 2))
+        )
+        out[:3, sel] = (p[None] * m[:, :, :-1]).sum(axis=2)
+        out[3, sel] = (p * (m[0, :, 1:] - m[0, :, :-1])).sum(axis=1)
     # many armed pulses and a small hazard: the delta method (no clipping, A concentrated)
     plain = (mean_a >= SMALL_MEAN_A) & (h > 0) & (h < 0.2)
     if plain.any():
@@ -281,32 +291,55 @@ def expected_histogram(
                 continue
             xk = np.maximum((te - et[:, k, None]) / t.scale_s, 0.0)
             lam += np.where(on[:, None], ep[:, k, None] * -np.expm1(np.log1p(xk) - xk), 0.0)
-        a0 = armed_at_start[sl, None]
-        if dead_cells >= n_cells:  # the first photon of the window
-            e = a0 * -np.diff(np.exp(-lam), axis=1)
-        else:
-            p = -np.expm1(-np.diff(lam, axis=1))
-            e = np.zeros_like(p)
-            recent = np.zeros(len(p))
-            m = max(int(round(dead_cells)), 0)
+        a0 = armed_at_start[sl]
+        p = -np.expm1(-np.diff(lam, axis=1))
+        # pulses dead when the grid opens, from an avalanche less than d before it (the
+        # background's, at r a0 per unit time since the gate opened), re-arm inside it
+        origin = te[:, :-1] - t.dead_time_s
+        rho = np.where(
+            (origin >= 0.0) & (origin < te[:, :1]), (rate_hz[sl] * a0)[:, None] * dt, 0.0
+        )
+        rearmed = np.cumsum(rho, axis=1)
+        m = int(round(min(dead_cells, n_cells + 1.0)))
+        if m > n_cells:  # no re-arming after an avalanche of the grid: in closed form
+            # armed_i = a0 e^-(L_i - L_0) + sum_{c < i} rho_c e^-(L_i - L_{c+1}), the sum
+            # as a running log-sum-exp (L reaches 10^4 in a bright echo)
+            rel = lam - lam[:, :1]
+            armed = a0[:, None] * np.exp(-rel[:, :-1])
+            if rho.any():
+                with np.errstate(divide="ignore"):
+                    terms = np.log(rho) + rel[:, 1:]
+                acc = np.logaddexp.accumulate(terms, axis=1)
+                back = np.full_like(acc, -np.inf)
+                back[:, 1:] = acc[:, :-1]  # re-arms before cell i
+                armed = armed + np.exp(back - rel[:, :-1])
+            e = np.minimum(armed, 1.0) * p
+        else:  # cell by cell, the cells' rows contiguous
+            p_t = np.ascontiguousarray(p.T)
+            base_t = np.ascontiguousarray((a0[:, None] + rearmed).T)
+            e_t = np.zeros_like(p_t)
+            recent = np.zeros(len(p))  # avalanches of the grid within the dead time
             for i in range(n_cells):
-                e[:, i] = np.maximum(a0[:, 0] - recent, 0.0) * p[:, i]
-                recent += e[:, i]
+                e_t[i] = np.clip(base_t[i] - recent, 0.0, 1.0) * p_t[i]
+                recent += e_t[i]
                 if m == 0:
-                    recent -= e[:, i]
+                    recent -= e_t[i]
                 elif i - m + 1 >= 0:
-                    recent -= e[:, i - m + 1]
+                    recent -= e_t[i - m + 1]
+            e = e_t.T
         # jitter: convolve the cells with the Gaussian, keep the window's cells, sum into bins
         from scipy.ndimage import convolve1d  # noqa: PLC0415
 
         ej = convolve1d(e, kern, axis=1, mode="constant")
         qb = ej[:, reach : reach + n_bins * k_fine].reshape(len(e), n_bins, k_fine).sum(axis=2)
         q[sl] = qb
-        # armed share at bin j: a0 less the avalanches within the dead time before j
+        # armed share at bin j: a0 and the re-armed, less the avalanches within the dead time
+        # before j (what Coates' A_j counts)
         cq = np.concatenate([np.zeros((len(qb), 1)), np.cumsum(qb, axis=1)], axis=1)
         j = np.arange(n_bins)
         lo_j = np.maximum(j - dead_bins, 0) if dead_bins < n_bins else np.zeros_like(j)
-        alpha[sl] = a0 - (cq[:, j] - cq[:, lo_j])
+        back_in = rearmed[:, reach + j * k_fine]
+        alpha[sl] = a0[:, None] + back_in - (cq[:, j] - cq[:, lo_j])
     back = np.empty_like(order)
     back[order] = np.arange(n)
     return q[back], np.clip(alpha, 0.0, 1.0)[back]
@@ -381,14 +414,12 @@ def coates_centroid(
     c = t_bin - t_c[:, None]  # Z = sum_j c_j v_j has the centroid's spread times V
     if coates:
         # the Doob decomposition of Z over the bins: bin j's own spread, and its counts
-        # moving the armed pulses of every later bin, R'_k = sum_{i >= k} c_i (alpha_i /
-        # alpha_k) E[m(A_i + 1) - m(A_i)] (each armed pulse at k stays armed at i with
-        # alpha_i / alpha_k)
-        later = np.cumsum((c * alpha * ed)[:, ::-1], axis=1)[:, ::-1]
-        r_next = np.zeros_like(later)
-        r_next[:, :-1] = np.where(
-            alpha[:, 1:] > 0, later[:, 1:] / np.maximum(alpha[:, 1:], 1e-300), 0.0
-        )
+        # moving the armed pulses of every later bin: R'_k, how the later bins' expected sum
+        # moves with one more armed pulse at k, R'_k = c_k E[m(A_k + 1) - m(A_k)] +
+        # (1 - h_k) R'_{k+1} (an armed pulse stays armed past bin k with 1 - h_k)
+        r_next = np.zeros_like(q)
+        for j in range(n_b - 2, -1, -1):
+            r_next[:, j] = c[:, j + 1] * ed[:, j + 1] + (1.0 - h[:, j + 1]) * r_next[:, j + 1]
         var_n = t.n_pulses * alpha * h * (1.0 - h)
         var_z = (c * c * ev - 2.0 * c * r_next * ec + r_next * r_next * var_n).sum(axis=1)
     else:  # multinomial counts over the frame, per pulse

@@ -29,14 +29,21 @@ def atomic_path(path: str | Path):
     """Yield a temporary path next to ``path``; rename it to ``path`` only if the block succeeds.
 
     The temporary file is hidden (``.NAME.lmapd-PID-XXXX.part``); ``remove_stale_parts`` removes
-    those a killed process left (the ``lmapd`` commands call it on their output folders).
+    those a killed process left (the ``lmapd`` commands call it on their output folders). A
+    ``path`` that is itself such a temporary file (the commands stage their outputs in them) is
+    written in place: its owner renames it, and no temporary of a temporary (a nested name that
+    the commands' clean-up would not recognise as its own) is made.
     """
     path = Path(path)
     if not path.parent.exists():
         raise FileNotFoundError(f"output folder does not exist: {path.parent}")
-    tmp = part_path(path)
     umask = os.umask(0)
     os.umask(umask)
+    if is_part_path(path):
+        yield path
+        os.chmod(path, 0o666 & ~umask)
+        return
+    tmp = part_path(path)
     try:
         yield tmp
         os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600; give the file the usual mode
@@ -60,6 +67,14 @@ def part_path(path: str | Path) -> Path:
     )
     os.close(fd)
     return Path(tmp)
+
+
+def is_part_path(path: str | Path) -> bool:
+    """Whether ``path`` is named as :func:`part_path` names its temporary files."""
+    name = Path(path).name
+    head, tag, tail = name.rpartition(_PART_TAG)
+    pid_text, _, rest = tail.partition("-")
+    return bool(tag) and head.startswith(".") and pid_text.isdigit() and ".part" in rest
 
 
 def remove_stale_parts(folder: str | Path) -> list[Path]:

@@ -18,6 +18,42 @@ import simcore
 from app.payloads import cloud, image, scene3d, stats, waveforms
 from app.runner import StaleRequest
 from app.state import MAX_SELECTED_PIXELS
+from simcore.receivers import gm_apd
+from simcore.receivers.gm_limits import BYTES_PER_EVENT, MAX_EVENTS
+
+# The server's budget for one frame. A Geiger-mode frame costs about 1.2 us of the two cores and
+# 101 bytes per recorded avalanche (receiver and detection stages; 11.5 M avalanches took 14 s):
+# 8 M avalanches is about 10 s and 0.8 GB, the most one student's frame may take. One pixel's
+# avalanches in one gate are bounded by the core's own limit.
+MAX_FRAME_AVALANCHES = 8_000_000
+
+
+class FrameRefused(ValueError):
+    """A frame over the server's budget, refused before its costly stages run; the message
+    names the page's controls that bring it back within the budget."""
+
+
+def check_budget(pipeline: simcore.Pipeline, scene: simcore.Scene) -> None:
+    """Raise FrameRefused if ``scene``'s frame would exceed the server's budget. Called before
+    each stage ``pipeline`` computes: once the echo and background stages of ``scene`` are
+    done (and the receiver is not), the Geiger-mode frame's avalanches are estimated exactly as
+    the core does before drawing them (``gm_apd.frame_avalanches``; and the core's own bounds,
+    ``gm_apd.frame_load``, so that no frame reaches its refusal)."""
+    if scene.receiver.kind != "gm_apd" or pipeline.cached("receiver", scene) is not None:
+        return
+    echo = pipeline.cached("echo", scene)
+    background = pipeline.cached("background", scene)
+    if echo is None or background is None:
+        return
+    total = gm_apd.frame_avalanches(scene, echo, background)
+    worst, bound = gm_apd.frame_load(scene, echo, background)  # the core's own limits
+    if total > MAX_FRAME_AVALANCHES or worst > gm_apd.MAX_EVENTS_PER_PULSE or bound > MAX_EVENTS:
+        raise FrameRefused(
+            f"this frame would record about {total:.2g} avalanches "
+            f"({total * BYTES_PER_EVENT / 1e9:.2g} GB; at most {MAX_FRAME_AVALANCHES:,} per "
+            "frame here): lower the Pulses per frame, the Dark count rate or the Pixels, or "
+            "raise the Transmit attenuation or the Dead time"
+        )
 
 
 @dataclass(frozen=True)
@@ -111,8 +147,13 @@ class Engine:
         pipeline checks it between stages (simcore.Cancelled), and again before the views.
         """
         t0 = time.perf_counter()
+
+        def should_stop() -> bool:
+            check_budget(self.pipeline, request.scene)
+            return stale()
+
         try:
-            result = self.pipeline.run(request.scene, should_stop=stale)
+            result = self.pipeline.run(request.scene, should_stop=should_stop)
         except simcore.Cancelled:
             raise StaleRequest from None  # dropped by the runner, not an error
         if stale():
@@ -160,8 +201,14 @@ class Engine:
 
         Raises StaleRequest like :meth:`compute`.
         """
+        scene = self.preview_scene(request.scene)
+
+        def should_stop() -> bool:
+            check_budget(self.preview_pipeline, scene)
+            return stale()
+
         try:
-            result = self.preview_pipeline.run(self.preview_scene(request.scene), should_stop=stale)
+            result = self.preview_pipeline.run(scene, should_stop=should_stop)
         except simcore.Cancelled:
             raise StaleRequest from None
         if stale():

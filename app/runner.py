@@ -64,8 +64,12 @@ class Runner(Generic[Request, Value]):
         max_wait_s: float = 0.1,
         min_refresh_s: float = 0.5,
         name: str = "lmapd-runner",
+        refusals: tuple[type[BaseException], ...] = (),
     ):
+        """``refusals``: the exceptions that are answers, not faults (a request the core or the
+        server refuses, with a message for the user): logged in one line, without a trace."""
         self._compute = compute
+        self.refusals = refusals
         self._deliver = deliver
         self.debounce_s = debounce_s
         self.max_wait_s = max_wait_s
@@ -227,6 +231,9 @@ class Runner(Generic[Request, Value]):
                 outcome = Outcome(generation, value=self._compute(request))
             except StaleRequest:
                 outcome = None
+            except self.refusals as exc:
+                log.info("generation %d refused: %s", generation, exc)
+                outcome = Outcome(generation, error=exc)
             except Exception as exc:  # shown to the user as a message, logged with its trace
                 log.exception("computation of generation %d failed", generation)
                 outcome = Outcome(generation, error=exc)

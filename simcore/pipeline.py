@@ -109,6 +109,17 @@ class Pipeline:
                 names.append(stage.name)
         return names
 
+    def cached(self, name: str, scene: Scene) -> Any:
+        """Stage ``name``'s cached output if it is ``scene``'s (its inputs unchanged), else None;
+        nothing is computed (a caller may look at a finished stage before the next runs)."""
+        keys: dict[str, tuple] = {}
+        for stage in CHAIN:
+            keys[stage.name] = (stage.reads(scene), *(keys[u] for u in stage.upstream))
+            if stage.name == name:
+                hit = self._cache.get(name)
+                return hit[1] if hit is not None and hit[0] == keys[name] else None
+        return None
+
     def _output(self, stage: Stage, scene: Scene, key: tuple, outputs: dict, should_stop):
         """The stage's output (cached under ``key``, or computed) and its compute time [s]."""
         cached = self._cache.get(stage.name)

@@ -20,13 +20,13 @@ from typing import Any
 import numpy as np
 
 import simcore
-from app.engine import Engine, Frame, Preview, Request
+from app.engine import Engine, Frame, FrameRefused, Preview, Request
 from app.logic import exports
 from app.logic.compare import FrameCompare
 from app.logic.controls import ControlPanel
 from app.logic.flyaround import FlyaroundLogic
 from app.logic.lessons import LessonGuide
-from app.logic.links import controls_from_link, link_query
+from app.logic.links import LINK_NAMES, controls_from_link, link_query
 from app.logic.pacing import FramePacer
 from app.logic.parts import PartHighlight
 from app.logic.scene_map import resolved_materials, scene_from_controls
@@ -36,7 +36,7 @@ from app.logic.upload import LoadedTarget, TargetUploads
 from app.payloads import scene3d, stats, style
 from app.payloads import waveforms as waveforms_payload
 from app.runner import Outcome, Runner
-from app.state import STATE_KEYS, Controls, controls_from_scene, preset_of
+from app.state import SPECS, STATE_KEYS, Controls, controls_from_scene, preset_of
 from simcore.target import fov_fill_distance_m, parts_table
 
 
@@ -77,8 +77,16 @@ class AppLogic:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._applied_faces_key: tuple | None = None
         self._pushed_generation = 0  # generation of the frame the page shows
+        # the controls of each request under way, and those of the frame the page shows (a
+        # refused frame's controls go back to them)
+        self._controls_of: dict[int, Controls] = {}
+        self._shown_controls = initial_controls
+        self._keep_message = False  # the next frame is the one shown again after a refusal
         self.runner: Runner[Request, Frame] = Runner(
-            self._compute, self._deliver, debounce_s=debounce_s
+            self._compute,
+            self._deliver,
+            debounce_s=debounce_s,
+            refusals=(simcore.SceneError, FrameRefused),
         )
         # the children, one per feature
         self.panel = ControlPanel(self.state, initial_controls)  # the scene's controls
@@ -187,7 +195,7 @@ class AppLogic:
         try:
             scene = self.flyaround.apply(scene_from_controls(self.base_scene, controls))
         except ValueError as exc:  # SceneError: a value the core refuses
-            self.state.error_message = f"Invalid scene: {exc}"
+            self.state.error_message = f"Refused: {on_screen(str(exc))}" + self._restore_shown()
             return
         self.submit(scene)
 
@@ -206,7 +214,9 @@ class AppLogic:
             preview_first=self.previews and not self.state.fly_playing,
         )
         self.state.busy = True
-        return self.runner.submit(request)
+        generation = self.runner.submit(request)
+        self._controls_of[generation] = self.panel.current
+        return generation
 
     def use_target(
         self, scene: simcore.Scene, engine: Engine, initial_controls: Controls, name: str
@@ -248,7 +258,11 @@ class AppLogic:
         name = self.state.target_name if same else scene.target.mesh
         with self.state:
             self.state.update(
-                {**initial.as_state(), "input_message": "; ".join([f"Opened {label}", *messages])}
+                {
+                    **initial.as_state(),
+                    "input_message": "; ".join(messages),  # values the controls cannot show
+                    "design_message": f"Showing {label} in the views.",
+                }
             )
         self.use_target(scene, engine, initial, name)
 
@@ -404,13 +418,34 @@ class AppLogic:
         self._push(outcome)
 
     def _show_error(self, error: BaseException | None) -> None:
-        if isinstance(error, ValueError):  # SceneError, TargetError: messages meant for users
-            text = f"Simulation failed: {error}"
-        else:
-            text = f"Simulation failed ({type(error).__name__}): {error}"
+        """A frame that failed or was refused: its message, and the controls back to the values
+        of the frame shown (a refused combination must not stay on the sliders)."""
         with self.state:
-            self.state.error_message = text + " (showing the last good result)"
+            if isinstance(error, FrameRefused):
+                text = f"Refused: {error}" + self._restore_shown()
+            elif isinstance(error, ValueError):  # SceneError, TargetError: meant for users
+                text = f"Simulation failed: {on_screen(str(error))}" + self._restore_shown()
+            else:
+                text = f"Simulation failed ({type(error).__name__}): {error}"
+                text += " (showing the last good result)"
+            self.state.error_message = text
             self.state.busy = self.pacer.held is not None
+
+    def _restore_shown(self) -> str:
+        """Put the scene's controls back to those of the frame shown (the display choices stay
+        as they are); what the message adds about it."""
+        shown = dataclasses.replace(
+            self._shown_controls,
+            color_by=self.panel.current.color_by,
+            image_kind=self.panel.current.image_kind,
+        )
+        changed = {k: v for k, v in shown.as_state().items() if self.state[k] != v}
+        self.panel.current = shown
+        if not changed:
+            return " (showing the last good result)"
+        self._keep_message = True  # the frame shown comes again: the refusal stays on the page
+        self.state.update(changed)  # their change handler resubmits the frame shown (cached)
+        return "; the controls are back to the values of the frame shown"
 
     def on_frame_shown(self, key: str = "", *_: Any, **__: Any) -> None:
         """The page drew frame ``key`` (so every frame sent before it is done too): a waiting
@@ -474,8 +509,13 @@ class AppLogic:
         if frame.faces_key != self._applied_faces_key:
             update["seen_facets"] = frame.seen_facets
             self._applied_faces_key = frame.faces_key
+        if self._keep_message:
+            del update["error_message"]
+            self._keep_message = False
         self.last_frame = frame
         self._pushed_generation = outcome.generation
+        self._shown_controls = self._controls_of.get(outcome.generation, self._shown_controls)
+        self._controls_of = {g: c for g, c in self._controls_of.items() if g > outcome.generation}
         self.selection.shown(frame, selection)
         self.pacer.sent(key)  # anything still waiting is older than this frame
         self.n_frames_pushed += 1
@@ -496,6 +536,19 @@ class AppLogic:
 
 
 PREVIEW_LABEL = "preview: 1 ray per pixel"
+# the core's names of the settings the page's controls set, with the controls' labels
+SCENE_KEY_LABELS = {
+    name: SPECS[key].label for key, (name, _) in LINK_NAMES.items() if key in SPECS
+} | {"detector.pixels": "Pixels", "laser.pulse_energy_j": "Pulse energy"}
+
+
+def on_screen(message: str) -> str:
+    """A core message with the names of the settings the page's controls set given as those
+    controls' labels (gm.pulses -> 'Pulses per frame')."""
+    for name in sorted(SCENE_KEY_LABELS, key=len, reverse=True):
+        if "." in name:
+            message = message.replace(name, f"'{SCENE_KEY_LABELS[name]}'")
+    return message
 
 
 def frame_label(frame: Frame) -> str:

@@ -13,7 +13,7 @@ from app.logic.scene_map import preset_text
 from app.state import PRESET_CHOICES, SPECS, SUBRAY_CHOICES, ControlSpec
 from app.ui import design, flyaround, lessons
 from app.ui.upload import upload_panel
-from app.ui.widgets import a11y_attributes, html_attributes, labelled_toggle
+from app.ui.widgets import a11y_attributes, button_toggle, html_attributes, labelled_toggle
 
 SHARE_URL = "trame.utils.lmapdLink ? trame.utils.lmapdLink.url(share_query) : ''"
 SLOW_RAYS = 2e6  # rays per flash above which the page warns that updates take seconds
@@ -203,17 +203,20 @@ def materials_panel() -> None:
 
 
 def display_choices() -> None:
-    labelled_toggle(
-        "Colour points by",
-        "color_by",
-        [
-            ("Range", "range", ""),
-            ("SNR", "snr", ""),
-            ("Outlier flag", "outlier", ""),
-            ("Range error", "range_error", ""),
-            ("Part", "part", ""),
-        ],
-    )
+    with html.Div(classes="control"):  # five choices: the buttons wrap in the drawer
+        html.Div("Colour points by", classes="control-label text-body-2")
+        button_toggle(
+            "color_by",
+            [
+                ("Range", "range", ""),
+                ("SNR", "snr", ""),
+                ("Outlier flag", "outlier", ""),
+                ("Range error", "range_error", ""),
+                ("Part", "part", ""),
+            ],
+            classes="wrap-toggle",
+            label="Colour points by",
+        )
 
 
 def share_panel() -> None:

@@ -229,6 +229,9 @@ html { overflow-y: auto; }
 .chart-box { position: relative; margin: 0 8px 8px 8px; }
 .waveform-box { height: clamp(280px, 37vh, 520px); }
 .snr-box { height: 120px; }
+.design-front-box { height: 280px; }
+.wrap-toggle { flex-wrap: wrap; height: auto !important; max-width: 100%; }
+.wrap-toggle .v-btn { min-height: 26px; }
 .chart-box .js-plotly-plot, .chart-box .plot-container { height: 100%; }
 .stats-table td { height: 22px !important; font-size: 0.78rem; padding: 0 6px !important; }
 .stat-value { font-variant-numeric: tabular-nums; font-weight: 500; text-align: right; }

@@ -2,12 +2,14 @@
 
 lmapd app [--host 127.0.0.1] [--port 8080] [--scene SCENE] [--shared]
           [--max-sessions N] [--memory-cap-mb MB] [--idle-s S] [--no-spare] [--no-preview]
+          [--studies DIR]
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+from pathlib import Path
 from typing import Any
 
 from .common import CliError
@@ -29,6 +31,12 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     app.add_argument(
         "--no-preview", action="store_true", help="always wait for the preset's frame (no preview)"
     )
+    app.add_argument(
+        "--studies",
+        metavar="DIR",
+        help="a folder of finished design studies (lmapd design --out DIR/NAME) for the app's "
+        "Design panel",
+    )
     app.set_defaults(func=run_cli)
     return app
 
@@ -47,6 +55,10 @@ def run_cli(args: argparse.Namespace) -> int:
     argv = ["--host", args.host, "--port", str(args.port)]
     if args.scene:
         argv += ["--scene", args.scene]
+    if args.studies:
+        if not Path(args.studies).is_dir():
+            raise CliError(f"--studies {args.studies!r} is not a folder")
+        argv += ["--studies", args.studies]
     for option in ("max_sessions", "memory_cap_mb", "idle_s"):
         value = getattr(args, option, None)
         if value is not None:

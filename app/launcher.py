@@ -243,6 +243,7 @@ class Launcher:
     scene : the scene every session starts from (a file or a built-in name; None: paper)
     command : builds a child's command from ``scene`` and ``options`` (tests may replace it)
     options : the sessions' app options (``--no-preview``)
+    origins : the addresses a reverse proxy serves the launcher at (their pages may connect)
     """
 
     def __init__(
@@ -253,13 +254,14 @@ class Launcher:
         scene: str | None = None,
         command: Callable[..., list[str]] = child_command,
         options: tuple[str, ...] = (),
+        origins: tuple[str, ...] = (),
     ):
         self.token = token
         self.caps = caps
         self.scene = scene
         self.command = command
         self.options = options
-        self.door = security.Door(token, host, security.Limits())
+        self.door = security.Door(token, host, security.Limits(), origins)
         self.sessions: dict[str, Child] = {}
         self.spare: asyncio.Task | None = None
         self.n_starting = 0  # sessions being created (counted against the cap)

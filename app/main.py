@@ -49,12 +49,19 @@ class LmapdApp:
         self.token = secrets.token_urlsafe(32)  # this launch's access token
         self.guard: security.Guard | None = None
         self.door: security.Door | None = None
+        self.origins: tuple[str, ...] = ()  # a reverse proxy's addresses (--public-url)
 
     @property
     def state(self):
         return self.server.state
 
-    def start(self, host: str, port: int, limits: security.Limits | None = None) -> None:
+    def start(
+        self,
+        host: str,
+        port: int,
+        limits: security.Limits | None = None,
+        origins: tuple[str, ...] = (),
+    ) -> None:
         """Serve until interrupted: no browser is opened and an idle server stays alive. Only
         the page at the printed address (it carries the access token) can connect."""
         trame_args = trame_arguments(host, port, self.token)
@@ -65,9 +72,15 @@ class LmapdApp:
         cli.parse_known_args = lambda args=None, namespace=None: parse(
             trame_args if args is None else args, namespace
         )
+        self.origins = origins
         self.server.controller.on_server_ready.add(self._announce)
         self.guard, self.door = security.install(
-            self.server, token=self.token, host=host, client_keys=client_keys(), limits=limits
+            self.server,
+            token=self.token,
+            host=host,
+            client_keys=client_keys(),
+            limits=limits,
+            origins=origins,
         )
         self.server.start(
             host=host, port=port, open_browser=False, timeout=0, show_connection_info=False
@@ -75,7 +88,8 @@ class LmapdApp:
 
     def _announce(self, **_) -> None:
         host = self.server.server_options.host
-        for line in start_message(host, self.server.port, self.token):
+        lines = start_message(host, self.server.port, self.token)
+        for line in lines + public_lines(self.origins, self.token):
             print(line, flush=True)
 
 
@@ -169,6 +183,19 @@ def start_message(host: str, port: int, token: str, lan: list[str] | None = None
     return lines
 
 
+def public_lines(origins: tuple[str, ...], token: str) -> list[str]:
+    """The addresses a reverse proxy serves the app at, each with the token, to print."""
+    lines = []
+    for url in origins:
+        origin = security.normal_origin(url)
+        if origin is None:
+            lines.append(f"lmapd-sim app: warning: --public-url {url!r} is no http(s) address")
+            continue
+        base = url.strip().rstrip("/")
+        lines.append(f"lmapd-sim app: through the proxy: {base}/?token={token}")
+    return lines
+
+
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
         prog="lmapd app", description="Serve the live LM-APD imaging app (no browser is opened)."
@@ -213,6 +240,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         type=float,
         default=60.0,
         help="a session whose page has been closed this long ends (default 60 s)",
+    )
+    parser.add_argument(
+        "--public-url",
+        action="append",
+        default=[],
+        metavar="URL",
+        help="the address a reverse proxy serves the app at (https://NAME): its pages may "
+        "connect, and it is printed as an address to open; repeatable (docs: serving)",
     )
     parser.add_argument(
         "--input-idle-min",
@@ -278,10 +313,13 @@ def run_launcher(args: argparse.Namespace) -> int:
     options = ("--no-preview",) if args.no_preview else ()
     if args.studies:
         options += ("--studies", os.path.abspath(args.studies))
-    door = launcher.Launcher(token, args.host, caps, scene=args.scene, options=options)
+    origins = tuple(args.public_url)
+    door = launcher.Launcher(
+        token, args.host, caps, scene=args.scene, options=options, origins=origins
+    )
 
     def announce(port: int) -> None:
-        for line in start_message(args.host, port, token):
+        for line in start_message(args.host, port, token) + public_lines(origins, token):
             print(line, flush=True)
         print(
             f"lmapd-sim app: each tab its own session: at most {caps.max_sessions} at once, "
@@ -328,4 +366,5 @@ def main(argv: list[str] | None = None) -> int:
     if token is not None:
         app.token = token
         signal.signal(signal.SIGTERM, _interrupt)  # the launcher stops its sessions gracefully
-    return serve_until_stopped(lambda: app.start(args.host, args.port), args)
+    origins = tuple(args.public_url)
+    return serve_until_stopped(lambda: app.start(args.host, args.port, origins=origins), args)

@@ -242,10 +242,13 @@ def file_upload(value: Any) -> Any:
 class Door:
     """The HTTP side: the access token, the allowed origins and the connection count."""
 
-    def __init__(self, token: str, host: str, limits: Limits):
+    def __init__(self, token: str, host: str, limits: Limits, origins: tuple[str, ...] = ()):
         self.token = token
         self.host = host.strip("[]").lower()
         self.limits = limits
+        # the addresses a reverse proxy serves the app at (https://name[:port]): their pages
+        # are the app's own too
+        self.origins = {o for o in (normal_origin(u) for u in origins) if o}
         self.n_connections = 0
         self.n_refused = 0
 
@@ -271,6 +274,8 @@ class Door:
         except ValueError:
             return f"a malformed Origin {echo(origin)}"
         name = (parts.hostname or "").lower()
+        if normal_origin(origin) in self.origins:
+            return None
         if parts.scheme not in ("http", "https") or port != _local_port(request):
             return f"a foreign Origin {echo(origin)}"
         if self.host in WILDCARD_HOSTS:  # any name may reach us: the page's own (same origin)
@@ -318,6 +323,18 @@ class Door:
             return await handler(request)
         finally:
             self.n_connections -= 1
+
+
+def normal_origin(url: str) -> str | None:
+    """``scheme://host:port`` of an http(s) address (the port written out), or None."""
+    try:
+        parts = urlsplit(url.strip())
+        port = parts.port or {"http": 80, "https": 443}.get(parts.scheme, 0)
+    except ValueError:
+        return None
+    if parts.scheme not in ("http", "https") or not parts.hostname:
+        return None
+    return f"{parts.scheme}://{parts.hostname.lower()}:{port}"
 
 
 def _local_port(request: web.Request) -> int:
@@ -532,13 +549,15 @@ def install(
     host: str,
     client_keys: Mapping[str, Screen],
     limits: Limits | None = None,
+    origins: tuple[str, ...] = (),
 ):
-    """Lock ``server`` (a trame Server, before it starts) to its own page: returns the guard and
-    the door (their counters are read by tests)."""
+    """Lock ``server`` (a trame Server, before it starts) to its own page (and the pages of
+    ``origins``, a reverse proxy's addresses): returns the guard and the door (their counters
+    are read by tests)."""
     limits = limits or Limits()
     sync = ClientStateSync(server.state, client_keys)
     guard = Guard(server, sync, limits)
-    door = Door(token, host, limits)
+    door = Door(token, host, limits, origins)
 
     def configure(core_protocol) -> None:
         core_protocol.registerLinkProtocol(guard)

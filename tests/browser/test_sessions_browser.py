@@ -1,6 +1,7 @@
 """Each tab its own scene (``lmapd app`` without ``--shared``: app.launcher) in a real Chromium:
-two tabs keep their own scenes, a link made in one tab opens a new session with the same scene, a
-bad session id gets the message page, and over the cap the 503 page says how many are open."""
+two tabs keep their own scenes and a reload opens a new one, the address bar shows neither the
+token nor the session, a link made in one tab opens a new session with the same scene, a bad
+session id gets the message page, and over the cap the 503 page says how many are open."""
 
 from __future__ import annotations
 
@@ -23,14 +24,22 @@ def point_count(page) -> int:
 
 
 def session_of(page) -> str:
-    """The session id in the page's address (``/s/<id>/...``)."""
-    parts = urllib.parse.urlsplit(page.url).path.split("/")
-    assert parts[1] == "s", page.url
+    """The session id of the page's address as it was loaded (``/s/<id>/...``); the address bar
+    shows only the launcher's root once the page has read its settings."""
+    loaded = page.evaluate("() => performance.getEntriesByType('navigation')[0].name")
+    parts = urllib.parse.urlsplit(loaded).path.split("/")
+    assert parts[1] == "s", loaded
     return parts[2]
 
 
+def moved(url: str) -> bool:
+    """The tab has left the door (``/?token=...``) for its session."""
+    return "/s/" in url or "token" not in url
+
+
 def open_tab(page, url: str, pixels: int = 64) -> None:
-    page.goto(url)
+    page.goto(url)  # the door's page moves the tab to its session
+    page.wait_for_url(moved)
     wait_first_frame(page)
     page.wait_for_function("(p) => window.trame.state.get('pixels') === p", arg=pixels)
     wait_settled(page)
@@ -38,9 +47,10 @@ def open_tab(page, url: str, pixels: int = 64) -> None:
 
 @pytest.fixture(scope="module")
 def launcher_url(artifacts_dir):
-    """A launcher (each page load its own session) with room for the five sessions below."""
+    """A launcher (each page load its own session) with room for the sessions below (those of a
+    finished test end a minute after its tabs closed)."""
     log_path = artifacts_dir / "app-server-sessions.log"
-    with app_server(log_path=log_path, sessions=True, app_args=("--max-sessions", "5")) as url:
+    with app_server(log_path=log_path, sessions=True, app_args=("--max-sessions", "8")) as url:
         yield url
 
 
@@ -50,16 +60,22 @@ def test_two_tabs_keep_their_own_scenes(page, launcher_url):
         open_tab(page, launcher_url + SMALL)
         open_tab(other, launcher_url + SMALL)
         assert session_of(page) != session_of(other)
+        shown = urllib.parse.urlsplit(page.url)  # neither the token nor the session
+        assert (shown.path, shown.query, shown.fragment) == ("/", "", ""), page.url
         before = point_count(other)
         assert state(page, "pitch_deg") == state(other, "pitch_deg") == 0
         set_field(page, "pitch_deg", 30)
         page.wait_for_function("() => window.trame.state.get('pitch_deg') === 30")
         wait_settled(page)
-        other.reload()  # a reload reconnects to the tab's own session, which kept its scene
-        wait_first_frame(other)
         wait_settled(other)
         assert state(page, "pitch_deg") == 30
         assert state(other, "pitch_deg") == 0 and point_count(other) == before
+        first = session_of(other)
+        other.reload()  # the address shown is the launcher's: a new session, the default scene
+        other.wait_for_url(moved)
+        wait_first_frame(other)
+        wait_settled(other)
+        assert session_of(other) != first and state(other, "pitch_deg") == 0
         set_field(other, "azimuth_deg", -20)
         other.wait_for_function("() => window.trame.state.get('azimuth_deg') === -20")
         wait_settled(other)
@@ -87,10 +103,8 @@ def test_a_link_made_in_one_tab_opens_a_new_session_with_the_same_scene(page, la
 
 def test_a_bad_session_id_gets_a_message_page(page, launcher_url):
     parts = urllib.parse.urlsplit(launcher_url)
-    token = dict(urllib.parse.parse_qsl(parts.query))["token"]  # then in the cookie
-    answer = page.goto(
-        f"{parts.scheme}://{parts.netloc}/s/no-such-session/?token={token}&pixels=32"
-    )
+    open_tab(page, launcher_url + SMALL)  # the token is then in the browser's cookie
+    answer = page.goto(f"{parts.scheme}://{parts.netloc}/s/no-such-session/?pixels=32")
     assert answer.status == 404
     assert page.locator(".launcher-title").inner_text() == "No such session"
     link = page.locator(".launcher-link")
@@ -118,6 +132,7 @@ def test_over_the_cap_a_503_page_says_how_many_are_open(page, artifacts_dir):
                 if answer.status != 503:
                     break
                 second.wait_for_timeout(500)
+            second.wait_for_url(moved)
             wait_first_frame(second)
             assert session_of(second)
         finally:

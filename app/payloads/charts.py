@@ -80,24 +80,28 @@ def time_axis(layout: dict, lo_ns: float, hi_ns: float) -> None:
 
 
 def range_axis(layout: dict, lo_ns: float, hi_ns: float) -> dict:
-    """A top axis giving the range c t / 2 [m] of the chart's times: its ticks at round ranges,
-    placed on the time axis it follows (zoom and pan move both). Returns the empty trace that
-    shows it (plotly draws an axis that a trace uses)."""
+    """A top axis giving the range c t / 2 [m] of the chart's times, inside the plot: its ticks
+    at round ranges, placed on the time axis it follows (zoom and pan move both). Returns the
+    empty trace that shows it (plotly draws an axis that a trace uses)."""
     lo_m, hi_m = lo_ns * 1e-9 * C_M_S / 2.0, hi_ns * 1e-9 * C_M_S / 2.0
     step = nice_step(hi_m - lo_m)
     first = math.ceil(lo_m / step)
     ranges = [k * step for k in range(first, math.floor(hi_m / step) + 1)]
     digits = _decimals(step)
-    layout["xaxis2"] = axis(
-        "range c t / 2 (m)",
-        matches="x",
-        overlaying="x",
-        side="top",
-        showgrid=False,
-        tickvals=[round(2.0 * r / C_M_S * 1e9, 6) for r in ranges],
-        ticktext=[f"{r:,.{digits}f}" for r in ranges],
-    )
-    layout["xaxis2"]["title"]["standoff"] = 2
+    layout["xaxis2"] = {
+        "matches": "x",
+        "overlaying": "x",
+        "side": "top",
+        "showgrid": False,
+        "zeroline": False,
+        "showline": False,
+        # inside the plot, along its top: clear of the legend above it
+        "ticks": "inside",
+        "ticklabelposition": "inside",
+        "tickfont": {"size": 10, "color": "#616161"},
+        "tickvals": [round(2.0 * r / C_M_S * 1e9, 6) for r in ranges],
+        "ticktext": [f"{r:,.{digits}f} m" for r in ranges],
+    }
     return {
         "type": "scatter",
         "mode": "lines",

@@ -115,7 +115,7 @@ def photon_figure(result: simcore.Result, selection: list) -> dict:
     if span:
         time_axis(layout, min(span), max(span))
         data.append(range_axis(layout, min(span), max(span)))
-    layout["margin"]["t"] = 10 + 18 * math.ceil(len(bars) * 3 / 2) + (34 if span else 0)
+    layout["margin"]["t"] = 10 + 18 * math.ceil(len(bars) * 3 / 2)
     return {"data": data, "layout": layout}
 
 

@@ -222,7 +222,6 @@ def waveform_figure(result: simcore.Result, selection: list) -> dict:
         lo_ns, hi_ns = min(times) * 1e9, max(times) * 1e9
         time_axis(layout, lo_ns, hi_ns)
         data.append(range_axis(layout, lo_ns, hi_ns))
-        layout["margin"]["t"] += 34
     return {"data": data, "layout": layout}
 
 

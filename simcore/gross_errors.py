@@ -20,7 +20,9 @@ all gross displacements pooled, form the table. The grid runs from ``TNR - GRID_
 ``TNR + GRID_ABOVE_TNR``: above it the share is below 1.5e-4 (none of 20,000 at SNR 12, TNR 5).
 
 The table is computed once per receiver, pulse and threshold (about 1 s) and kept in memory and
-in the user's on-disk cache (``simcore.cache``), so the Monte Carlo is imported only to make it.
+in the user's on-disk cache (``simcore.cache``), so the Monte Carlo is imported only to make it;
+thresholds between multiples of ``TNR_STEP`` interpolate the two tables around them
+(:func:`gross_errors_at`), so that a TNR slider does not pay a table for every value it passes.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import io
+import math
 import warnings
 from dataclasses import dataclass
 from functools import lru_cache
@@ -49,6 +52,7 @@ GATE_M = 2.5  # the calibration's range gate [m]...
 ECHO_AFTER_GATE_M = 0.45  # ...the echoes start this far into it (3 ns: the CFD's look back)
 SEED = 25  # the calibration's own seed: a table is the same for every frame
 MAX_ENTRIES = 64  # tables kept in the on-disk cache
+TNR_STEP = 0.5  # tables are computed at TNR multiples of this and interpolated between them
 
 
 @dataclass(frozen=True)
@@ -140,6 +144,36 @@ def gross_errors(
         except OSError as exc:
             warnings.warn(f"gross-error cache {file.parent} is not writable ({exc})", stacklevel=2)
     return table
+
+
+def gross_errors_at(
+    receiver: ReceiverModel,
+    tau_s: float,
+    a: float,
+    bandwidth_hz: float,
+    dt_s: float,
+    t_d_s: float,
+    cfd_fraction: float,
+    tnr: float,
+    resolution_s: float,
+    holdoff_s: float,
+) -> GrossErrors:
+    """The gross-error table at any threshold: the tables at the two multiples of TNR_STEP
+    around ``tnr`` (:func:`gross_errors`, each computed once), their probabilities interpolated
+    linearly in the TNR and the nearer one's displacements. A TNR slider dragged across a unit
+    then computes at most three tables, not one per value it passes; at a multiple of TNR_STEP
+    (TNR 5, the paper's) and below 1 the table is that TNR's own."""
+    rest = (resolution_s, holdoff_s)
+    head = (receiver, tau_s, a, bandwidth_hz, dt_s, t_d_s, cfd_fraction)
+    lo = math.floor(tnr / TNR_STEP) * TNR_STEP
+    w = (tnr - lo) / TNR_STEP
+    if tnr < 1.0 or w < 1e-9:
+        return gross_errors(*head, tnr, *rest)
+    below, above = gross_errors(*head, lo, *rest), gross_errors(*head, lo + TNR_STEP, *rest)
+    snr = np.union1d(below.snr, above.snr)
+    probability = (1.0 - w) * below.probability_at(snr) + w * above.probability_at(snr)
+    nearer = below if w < 0.5 else above
+    return GrossErrors(snr=snr, probability=probability, displacement_m=nearer.displacement_m)
 
 
 def _entry(folder: Path, args: tuple) -> Path:

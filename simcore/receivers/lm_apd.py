@@ -240,10 +240,10 @@ def _gross_errors(scene, echo, rx: LmApdResponse, r_true_m, r_meas_m, drawn, hol
     t = scene.timing
     from .. import gross_errors as gross  # noqa: PLC0415  (only when needed)
 
-    in_range = drawn & (rx.snr <= gross.snr_grid(t.tnr)[-1])
+    in_range = drawn & (rx.snr <= gross.snr_grid(t.tnr + gross.TNR_STEP)[-1])
     if not in_range.any():
         return r_meas_m
-    table = gross.gross_errors(
+    table = gross.gross_errors_at(
         rx.model, echo.shape.tau_s, echo.shape.a, scene.detector.bandwidth_hz, echo.dt_s,
         echo.cfd_delay_s, t.cfd_fraction, t.tnr, t.resolution_s, holdoff_s,
     )  # fmt: skip

@@ -123,3 +123,22 @@ def test_the_table_is_empty_above_its_grid_and_covers_the_threshold():
         0.0,
     ]
     assert table.probability_at(np.array([6.0]))[0] > 0.0
+
+
+def test_a_threshold_between_grid_points_interpolates_the_two_tables_around_it():
+    args = (RX, SHAPE.tau_s, SHAPE.a, 120e6, DT, T_D, K_ATT)
+    rest = (100e-12, 0.0)
+    on_grid = gross.gross_errors_at(*args, 5.0, *rest)
+    assert on_grid is gross.gross_errors(*args, 5.0, *rest)  # TNR 5: its own table
+    below, above = gross.gross_errors(*args, 5.0, *rest), gross.gross_errors(*args, 5.5, *rest)
+    mid = gross.gross_errors_at(*args, 5.2, *rest)
+    snr = np.union1d(below.snr, above.snr)  # the interpolated table's own grid
+    w = (5.2 - 5.0) / gross.TNR_STEP
+    want = (1 - w) * below.probability_at(snr) + w * above.probability_at(snr)
+    assert np.allclose(mid.probability_at(snr), want, rtol=1e-12, atol=0.0)
+    assert mid.displacement_m is below.displacement_m  # the nearer table's
+    # a drag across the cell asks for no table beyond its two ends
+    misses = gross.gross_errors.cache_info().misses
+    for tnr in (5.1, 5.2, 5.3, 5.4, 5.45):
+        gross.gross_errors_at(*args, tnr, *rest)
+    assert gross.gross_errors.cache_info().misses == misses

@@ -44,7 +44,7 @@ def test_the_first_frame_fills_every_view(app):
     assert s.array_image["pixels"] == 48 and s.array_image["png"].startswith(b"\x89PNG")
     assert len(s.selected_pixels) == 1 and s.waveforms["data"]
     assert [r["stage"] for r in s.stages][: len(simcore.STAGES)] == list(simcore.STAGES)
-    assert s.credit == "3D model: NASA/JPL-Caltech (NASA 3D Resources)"
+    assert s.credit == "3D model: Courtesy NASA/JPL-Caltech (NASA 3D Resources)"
     assert s.input_message == ""
 
 

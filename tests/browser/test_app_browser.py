@@ -99,7 +99,9 @@ def test_the_app_draws_reacts_to_the_distance_slider_and_shows_a_clicked_pixels_
     page.screenshot(path=artifacts_dir / "app-loaded.png")
 
     assert page.title() == "lmapd-sim"
-    assert "NASA/JPL-Caltech (NASA 3D Resources)" in page.locator(".nasa-credit").inner_text()
+    assert (
+        "Courtesy NASA/JPL-Caltech (NASA 3D Resources)" in page.locator(".nasa-credit").inner_text()
+    )
     for box in (".scene-box", ".cloud-box"):
         canvas = page.locator(f"{box} canvas").first
         drawn = non_background_fraction(canvas.screenshot())

@@ -64,7 +64,7 @@ def item_daylight(run: ReproduceRun) -> dict[str, Any]:
         "pixels: by night and by day (Sun 30 deg from the line of sight)",
         fontsize=10,
     )
-    credit_line(fig, "3D model: NASA/JPL-Caltech (NASA 3D Resources)")
+    credit_line(fig, "3D model: Courtesy NASA/JPL-Caltech (NASA 3D Resources)")
     figure = run.save(fig, "daylight.png")
     run.step("daylight figure")
     return {

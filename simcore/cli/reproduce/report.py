@@ -82,7 +82,7 @@ def run_reproduction(
         "quick": settings.quick,
         "settings": {k: v for k, v in vars(settings).items() if k not in ("quick", "seed")},
         "material_names": list(MATERIAL_NAMES),
-        "target_credit": "3D model: NASA/JPL-Caltech (NASA 3D Resources)",
+        "target_credit": "3D model: Courtesy NASA/JPL-Caltech (NASA 3D Resources)",
         "items": items,
         "figures": [f for item in items.values() for f in item["figures"]],
         "timings_s": timings,

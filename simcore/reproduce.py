@@ -188,6 +188,7 @@ def run_summary(result: Result) -> dict[str, Any]:
         "snr_median",
         "range_sigma_m_median",
         "n_false_expected",
+        "n_false_crossings_expected",
     )
     return {k: (float(s[k]) if isinstance(s[k], np.floating) else s[k]) for k in keys}
 
@@ -334,6 +335,7 @@ CONVENTION_COLUMNS = (
     "n_dropped",
     "n_outliers",
     "n_false_expected",
+    "n_false_crossings_expected",
     "n_points",
     "depth_extent_m",
 )

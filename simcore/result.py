@@ -175,6 +175,11 @@ class Result:
         n_lit = len(self.echo.pixel)
         n_target_points = len(self.cloud) - n_out
         finite_sigma = d.range_sigma_m[d.detected]
+        crossings = (
+            d.n_false_expected
+            if isinstance(d.n_false_per_pixel, np.ndarray)
+            else d.n_false_per_pixel * self.pixels**2
+        )
         return {
             "receiver_kind": self.scene.receiver.kind,
             "n_pixels": self.pixels**2,
@@ -191,11 +196,12 @@ class Result:
             "p_detect_min": _stat(d.p_detect, np.min),  # the weakest lit pixel's
             "snr_median": _stat(r.snr, np.median),
             "range_sigma_m_median": _stat(finite_sigma, np.median),
-            "n_false_expected": (
-                d.n_false_expected
-                if isinstance(d.n_false_per_pixel, np.ndarray)
-                else d.n_false_per_pixel * self.pixels**2
-            ),
+            # false alarms: the points they are expected to leave in the cloud per frame (with
+            # one stop, the first-stop arithmetic; docs/physics.md#false-points), the figure the
+            # cloud's n_outliers is drawn from; and the noise crossings over the gate (Eq. 28),
+            # more than the points wherever the stops per pixel cap them
+            "n_false_expected": d.summary_figures.get("n_false_points_expected", crossings),
+            "n_false_crossings_expected": crossings,
             **self._background_summary(),
             **self.detection.summary_figures,
             **({"quality": self.quality} if quality else {}),

@@ -92,7 +92,7 @@ def background_line(summary: dict) -> str:
         f"median {summary['background_power_w_median']:.3g} W over the lit target pixels, "
         f"max {summary['background_power_w_max']:.3g} W; {summary['n_sunlit_pixels']} sunlit "
         f"target pixels, {summary['n_earth_pixels']} Earth pixels, "
-        f"{summary['n_false_expected']:.3g} false alarms expected"
+        f"{summary['n_false_expected']:.3g} false points expected"
         + (f", {summary['n_saturated']} saturated" if summary["n_saturated"] else "")
     )
 

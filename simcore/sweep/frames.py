@@ -40,6 +40,7 @@ def frame_metrics(result: Result) -> dict[str, Any]:
     return {
         **{k: int(s[k]) for k, t, _ in METRICS if t == "int64"},
         "n_false_expected": float(s["n_false_expected"]),
+        "n_false_crossings_expected": float(s["n_false_crossings_expected"]),
         "p_detect_mean": s["p_detect_mean"],
         "snr_p10": _quantile(snr, 0.10),
         "snr_median": _quantile(snr, 0.50),

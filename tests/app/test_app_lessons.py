@@ -286,7 +286,7 @@ def figures_tnr_trade(app, pipeline, result) -> dict:
         figures[f"out{name}"] = summary(other, "n_outliers")
         figures[f"drop{name}"] = summary(other, "n_dropped")
         if name in ("4", "5", "6"):
-            figures[f"nf{name}"] = summary(other, "n_false_expected")
+            figures[f"nf{name}"] = summary(other, "n_false_crossings_expected")
     return figures
 
 

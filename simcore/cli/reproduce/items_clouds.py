@@ -223,7 +223,7 @@ def item_conventions(run: ReproduceRun) -> dict[str, Any]:
         ("range_sigma_m_median", "range sigma median (Eq. 24)"),
         ("range_sigma_cfd_m_median", "CFD part of it (Eq. 25)"),
         ("n_target_points", "target points"),
-        ("n_false_expected", "false alarms (expected)"),
+        ("n_false_crossings_expected", "false alarms (Eq. 28, expected)"),
         ("depth_extent_m", "depth extent (1-99 %)"),
     )
     fig = new_figure(11.0, 7.0)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import threading
 import time
 from typing import Any
 
@@ -112,6 +113,8 @@ class AppLogic:
         self.compare = FrameCompare(self.state)  # a pinned frame beside the new one
         self.studies = DesignStudies(self.state, studies_dir, self.open_scene)  # Design page
         server.trigger("open_design")(self.studies.open_design)
+        server.trigger("score_quality")(self.score_quality)
+        self.state.update({"quality_rows": [], "quality_busy": False})
         server.trigger("pin_frame")(self.pin_frame)
         server.trigger("unpin_frame")(self.compare.unpin)
         self.parts = PartHighlight(self.state, lambda: self.engine.model)  # in the 3D scene
@@ -343,6 +346,32 @@ class AppLogic:
             return
         self.compare.pin(self.last_frame, self.engine.frame)
 
+    def score_quality(self, *_: Any, **__: Any) -> None:
+        """Score the frame shown against the target's true mesh (simcore.quality: 0.1-0.2 s on
+        the MRO), in a thread of its own; shown only if that frame is still the one on the page
+        (a new frame clears the rows)."""
+        frame = self.last_frame
+        if frame is None or self.state.quality_busy:
+            return
+        self.state.quality_busy = True
+        if self.server.running:
+            self._loop = _running_loop() or self._loop
+
+        def work() -> None:
+            try:
+                rows = stats.quality_rows(frame.result.quality)
+            except Exception as exc:  # shown as a row, never a traceback
+                rows = [{"label": "Quality", "value": f"not available ({type(exc).__name__})"}]
+            self._on_ui_thread(self._show_quality, frame, rows)
+
+        threading.Thread(target=work, name="lmapd-quality", daemon=True).start()
+
+    def _show_quality(self, frame: Frame, rows: list[dict[str, str]]) -> None:
+        with self.state:
+            self.state.quality_busy = False
+            if frame is self.last_frame:
+                self.state.quality_rows = rows
+
     def reset_controls(self, *_: Any, **__: Any) -> None:
         """Back to the scene the app started with (the paper scene unless --scene was given)."""
         self.panel.reset()
@@ -489,6 +518,7 @@ class AppLogic:
             "view_text": waveforms_payload.view_text(frame.result.scene.receiver.kind),
             "snr_hist": frame.snr_histogram,
             "stats": frame.stats,
+            "quality_rows": [],  # the frame shown has not been scored yet
             "stages": stats.stage_rows(
                 frame.timings_s,
                 {"views (app)": frame.views_s, "request to page": total_s},

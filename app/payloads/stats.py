@@ -160,3 +160,31 @@ def snr_histogram(result: simcore.Result) -> dict:
         }
     ]
     return {"data": [bars], "layout": layout}
+
+
+def quality_rows(quality: dict) -> list[dict]:
+    """The frame scored against the target's true mesh (``Result.quality``): the figures a
+    student reads as "how good is this cloud", each with its unit."""
+
+    def mm(value, signed: bool = False) -> str:
+        if value is None:
+            return "n/a (no target point)"
+        return f"{1e3 * value:+.1f} mm" if signed else f"{1e3 * value:.1f} mm"
+
+    tau_cm = 100 * quality["tau_m"]
+    return [
+        {
+            "label": f"Precision (within {tau_cm:g} cm of the target)",
+            "value": f"{quality['precision']:.1%}",
+        },
+        {
+            "label": f"Recall (seen surface within {tau_cm:g} cm of a point)",
+            "value": f"{quality['recall']:.1%}",
+        },
+        {"label": "F-score", "value": f"{quality['f_score']:.3f}"},
+        {"label": "Range bias (median error)", "value": mm(quality["range_bias_m"], signed=True)},
+        {"label": "Range error RMS", "value": mm(quality["range_rmse_m"])},
+        {"label": "Range error, 95 % within", "value": mm(quality["range_error_p95_m"])},
+        {"label": "Outliers (false or > tau off)", "value": f"{quality['outlier_fraction']:.1%}"},
+        {"label": "Point density", "value": f"{quality['point_density_per_m2']:.3g} per m²"},
+    ]

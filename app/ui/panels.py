@@ -218,6 +218,28 @@ def _table(rows: str, key: str, label: str, value: str, value_class: str) -> Non
                 html.Td(value, classes=value_class)
 
 
+def quality_block() -> None:
+    """The frame scored against the target's true mesh, on demand (app.logic: score_quality)."""
+    with html.Div(classes="px-2 pt-1 quality-block"):
+        v3.VBtn(
+            "Score this cloud against the true target",
+            prepend_icon="mdi-target",
+            size="small",
+            variant="tonal",
+            color="primary",
+            loading=("quality_busy",),
+            click="trigger('score_quality')",
+            classes="score-quality",
+            v_if="!quality_rows.length",
+        )
+        with html.Div(v_if="quality_rows.length"):
+            html.Div(
+                "The cloud against the mesh it came from (docs/physics.md#imaging-quality)",
+                classes="subtitle text-caption px-2",
+            )
+            _table("quality_rows", "row.label", "{{ row.label }}", "{{ row.value }}", "stat-value")
+
+
 def stats_card() -> None:
     with v3.VCard(classes="view-card stats-card", elevation=1):
         with v3.VCardTitle(classes="card-title d-flex align-center flex-wrap ga-2"):
@@ -237,6 +259,7 @@ def stats_card() -> None:
                     "{{ row.ms }}",
                     ("['stat-value', row.cached ? 'text-disabled' : '']",),
                 )
+        quality_block()
         html.Div("{{ view_text.snr_caption }}", classes="subtitle text-caption px-4 pt-1")
         with html.Div(classes="chart-box snr-box"):
             plotly.Figure(

@@ -5,6 +5,7 @@ outliers apart, the array image is n x n, the waveform chart shows what the issu
 from __future__ import annotations
 
 import io
+import time
 import math
 
 import msgpack
@@ -272,3 +273,23 @@ def test_the_stats_panel_lists_counts_snr_and_stage_times(frame):
     assert rows[2]["ms"] == "12.0" and rows[-1]["stage"] == "views (app)"
     histogram = frame.snr_histogram
     assert sum(histogram["data"][0]["y"]) == len(frame.result.receiver.snr)
+
+
+def test_the_frame_shown_is_scored_against_the_true_target_on_demand():
+    from support.app_helpers import settle, small_app
+
+    with small_app(pixels=32) as app:
+        assert app.state.quality_rows == []
+        app.server.controller.trigger_fn("score_quality")()
+        deadline = time.monotonic() + 60
+        while app.state.quality_busy and time.monotonic() < deadline:
+            time.sleep(0.02)
+        rows = {r["label"]: r["value"] for r in app.state.quality_rows}
+        q = app.logic.last_frame.result.quality
+        assert rows["Precision (within 5 cm of the target)"] == f"{q['precision']:.1%}"
+        assert rows["F-score"] == f"{q['f_score']:.3f}"
+        # a new frame clears the score: it was the previous frame's
+        with app.state:
+            app.state.tnr = 4.0
+        settle(app)
+        assert app.state.quality_rows == []

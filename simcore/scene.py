@@ -760,7 +760,7 @@ def gm_analysis_window_bins(scene: Scene) -> float:
     g = scene.gm
     s = scene.laser.pulse_width_s * GM_PULSE_SCALE_OVER_TAU
     reach = 4.0 * g.jitter_s
-    window = (s + reach) / g.bin_s + (12.0 * s + reach) / g.bin_s + 2.0
+    window = (s + reach) / g.bin_s + (12.0 * s + reach) / g.bin_s + 3.0  # the ceils
     return min(window, gm_gate_bins(scene))
 
 

@@ -1,9 +1,23 @@
 """Stability at the extremes (issue 25): every value inside a key's documented range runs, or is
 refused before running with one message naming the key."""
 
-import pytest
+import math
+import subprocess
+import sys
 
-from simcore.scene import Scene, SceneError, key_reference, with_overrides
+import numpy as np
+import pytest
+from scipy import special
+
+import simcore
+from simcore.receivers import gm_apd, gm_events, gm_limits
+from simcore.scene import (
+    Scene,
+    SceneError,
+    gm_analysis_window_bins,
+    key_reference,
+    with_overrides,
+)
 
 L1 = "1 25544U 98067A   08264.51782528 -.00002182  00000-0 -11606-4 0  2927"
 L2 = "2 25544  51.6416 247.4627 0006703 130.5360 325.0288 15.72125391563537"
@@ -73,3 +87,245 @@ def test_a_tle_at_99_rev_per_day_says_its_orbit_lies_inside_the_earth():
 def test_the_iss_tle_still_reads():
     scene = with_overrides(Scene(), {"orbit.target_tle": f"{L1}\n{L2}"})
     assert scene.orbit.target_tle.startswith("1 25544")
+
+
+# -- Geiger mode: estimates before any heavy allocation -----------------------------------------
+def _gm(**overrides):
+    return with_overrides(
+        Scene(), {"receiver.kind": "gm_apd", "pixels": 16, "fidelity.subrays": 1, **overrides}
+    )
+
+
+@pytest.mark.parametrize("bin_s", [1e-100, 5e-324])
+def test_a_tdc_bin_that_splits_the_gate_past_int32_is_refused_naming_gm_bin_s(bin_s):
+    with pytest.raises(SceneError, match=r"gm\.bin_s = .* bins \(at most 2,147,483,647\)"):
+        _gm(**{"gm.bin_s": bin_s})
+
+
+def test_a_tdc_bin_too_fine_for_the_analysis_windows_is_refused_with_the_floor():
+    with pytest.raises(SceneError, match=r"gm\.bin_s = 1e-13 s is too fine.*at least") as err:
+        _gm(**{"gm.bin_s": 1e-13, "pixels": 64})
+    floor_s = float(str(err.value).split("at least ")[1].split(" s")[0])
+    assert _gm(**{"gm.bin_s": 1.01 * floor_s, "pixels": 64}).gm.bin_s > floor_s
+
+
+def test_a_tdc_bin_coarser_than_10_ns_is_out_of_range():
+    with pytest.raises(SceneError, match=r"gm\.bin_s .*valid range \(0, 1e-08\] s"):
+        _gm(**{"gm.bin_s": 1e-6})
+
+
+def test_the_analysis_window_estimate_bounds_the_one_detect_reads():
+    scene = _gm(**{"gm.jitter_s": 3e-9, "gm.bin_s": 1e-10})
+    res = simcore.simulate(scene)
+    s_scale = res.echo.shape.tau_s / res.echo.shape.a
+    g = scene.gm
+    pre = math.ceil((s_scale + gm_apd.JITTER_REACH * g.jitter_s) / g.bin_s) + 1
+    length = pre + math.ceil((gm_apd.ECHO_TAIL_SCALES * s_scale + 4 * g.jitter_s) / g.bin_s)
+    assert length <= gm_analysis_window_bins(scene) <= 1.01 * length + 2
+
+
+def test_a_frame_whose_avalanches_pass_the_memory_estimate_is_refused_before_drawing():
+    overrides = {
+        "pixels": 96,
+        "gm.dead_time_s": 1.0,
+        "timing.range_gate_m": 1e6,
+        "gm.pulses": 10_000,
+    }
+    with pytest.raises(SceneError, match=r"gm\.pulses = 10000 gives about .* GiB to simulate"):
+        simcore.simulate(_gm(**overrides))
+
+
+def test_the_bytes_per_avalanche_estimate_bounds_a_real_frame(tmp_path):
+    """A first-photon frame (one avalanche a pulse in every pixel: dark counts over a 1000 km
+    gate) of 64 x 64 px and 1,000 pulses, 4.1e6 avalanches, in a fresh process: its peak
+    resident memory stays below 600 MB (the process with the imaging chain loaded) plus the
+    estimate."""
+    events = 64 * 64 * 1000
+    code = (
+        "import resource, simcore\n"
+        "s = simcore.with_overrides(simcore.load_scene(), {'receiver.kind': 'gm_apd', "
+        "'pixels': 64, 'fidelity.subrays': 1, 'gm.dead_time_s': 1.0, "
+        "'timing.range_gate_m': 1e6, 'gm.pulses': 1000})\n"
+        "r = simcore.simulate(s)\n"
+        "print(len(r.receiver.events), resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=600
+    ).stdout.split()
+    n_events, peak_kib = int(out[0]), int(out[1])
+    assert n_events == pytest.approx(events, rel=0.01)
+    assert peak_kib * 1024 <= 600e6 + gm_limits.BYTES_PER_EVENT * n_events
+
+
+# -- Geiger mode: figures that mean something ---------------------------------------------------
+def test_the_armed_probability_is_the_first_photon_survival_within_one_dead_time():
+    r = np.array([1e5, 1e6, 1e7])
+    np.testing.assert_allclose(gm_limits.armed_probability(r, 0.5e-6, 1e-6), np.exp(-r * 0.5e-6))
+
+
+def test_the_armed_probability_tends_to_the_renewal_steady_state():
+    r, d = np.array([1e5, 1e6, 1e7]), 1e-6
+    got = gm_limits.armed_probability(r, 5e-3, d)
+    np.testing.assert_allclose(got, 1.0 / (1.0 + r * d), rtol=1e-6)
+
+
+@pytest.mark.parametrize(("rate_hz", "t_s", "dead_s"), [(1e6, 3.3e-6, 1e-6), (3e5, 2e-6, 1e-6)])
+def test_the_armed_probability_matches_a_simulated_renewal_counter(rate_hz, t_s, dead_s):
+    """Non-paralysable counters re-armed at 0, simulated event by event: the share armed at t
+    agrees with the closed form within 4 binomial standard errors."""
+    n = 40_000
+    rng = np.random.default_rng(25)
+    armed = np.zeros(n, dtype=bool)
+    live = np.ones(n, dtype=bool)
+    rearm = np.zeros(n)
+    while live.any():
+        fire = rearm + rng.exponential(1.0 / rate_hz, n)
+        quiet = live & (fire > t_s)  # no avalanche before t since its re-arm: armed
+        armed |= quiet
+        live &= ~quiet
+        rearm = np.where(live, fire + dead_s, rearm)
+        live &= rearm <= t_s  # still dead at t: not armed
+    p = float(gm_limits.armed_probability(np.array([rate_hz]), t_s, dead_s)[0])
+    assert armed.mean() == pytest.approx(p, abs=4 * math.sqrt(p * (1 - p) / n))
+
+
+@pytest.mark.parametrize("jitter_s", [5e-9, 1e-8, 1e-7, 1e-6])
+def test_jitter_longer_than_the_pulse_runs_and_its_window_holds_the_gaussian_share(jitter_s):
+    """Issue 25: jitter 1e-8 s broke window_fraction. With jitter far wider than the pulse the
+    arrival is Gaussian: a window of w holds 2 Phi(w / 2 sigma) - 1 of it."""
+    scene = _gm(**{"gm.jitter_s": jitter_s, "gm.bin_s": 1e-8 if jitter_s > 1e-8 else 2.5e-10})
+    res = simcore.simulate(scene)
+    f = gm_apd.window_fraction(scene, res.echo)
+    assert 0.0 < f <= 1.0
+    if jitter_s >= 1e-7:
+        w = gm_apd.window_bins(scene, res.echo) * scene.gm.bin_s
+        assert f == pytest.approx(special.erf(w / (2 * math.sqrt(2) * jitter_s)), abs=0.02)
+
+
+def test_without_jitter_the_window_fraction_is_the_pulse_shape_closed_form():
+    """Gamma(2, s): the best window of w holds max_a G((a + w) / s) - G(a / s)."""
+    scene = _gm(**{"gm.jitter_s": 1e-15})
+    res = simcore.simulate(scene)
+    s = res.echo.shape.tau_s / res.echo.shape.a
+    w = gm_apd.window_bins(scene, res.echo) * scene.gm.bin_s
+    a = np.linspace(0.0, 5 * s, 200_001)
+    g = gm_events.gamma2_cdf
+    want = float(np.max(g((a + w) / s) - g(a / s)))
+    assert gm_apd.window_fraction(scene, res.echo) == pytest.approx(want, abs=1e-4)
+
+
+@pytest.mark.parametrize("overrides", [{"gm.pulses": 1}, {"gm.dark_count_rate_hz": 1e9}])
+def test_a_threshold_beyond_the_pulses_gives_p_detect_0_and_says_why(overrides):
+    s = simcore.simulate(_gm(**overrides)).summary()
+    assert s["p_detect_mean"] == 0.0
+    assert any("above gm.pulses" in line for line in s["warnings"])
+
+
+def test_sunlight_that_keeps_the_pixels_dead_is_predicted_and_named():
+    """The Sun fires a pixel every few ns, so with 1 us of dead time it is blind when the echo
+    comes: the predicted P_d follows the simulated detections (sunlit pixels none, shaded ones
+    all) and a warning says why."""
+    res = simcore.simulate(_gm(**{"sun.mode": "manual", "pixels": 32}))
+    d, s = res.detection, res.summary()
+    n = len(d.p_detect)
+    observed = d.detected.mean()
+    assert observed == pytest.approx(d.p_detect.mean(), abs=4 * math.sqrt(0.25 / n) + 0.02)
+    assert any("dead" in line and "gm.dead_time_s" in line for line in s["warnings"])
+    assert s["snr_median"] is not None and math.isfinite(s["snr_median"])
+
+
+def test_a_piled_up_echo_ranged_before_the_gate_gives_no_point_behind_the_sensor():
+    res = simcore.simulate(_gm(distance_m=1.0))
+    rng_m = res.attributes["range_m"]
+    assert np.all(rng_m >= 0.0) and np.all(np.asarray(res.cloud.points)[:, 2] >= 0.0)
+
+
+# -- the waveform Monte Carlo at the gate's edges -----------------------------------------------
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        {"tnr": 0.5, "timing.gate_center_m": 800.0},  # the gate at [300, 1300] m
+        {"sun.mode": "manual", "receive.filter_width_m": 1e-7},  # a bright Sun, gate [0, 1000]
+    ],
+)
+def test_no_monte_carlo_point_lies_before_the_gate_opens(overrides):
+    scene = with_overrides(
+        Scene(),
+        {"pixels": 24, "fidelity.subrays": 1, "fidelity.noise_model": "montecarlo", **overrides},
+    )
+    res = simcore.simulate(scene)
+    lo = max(0.0, scene.gate_center_m - scene.timing.range_gate_m / 2)
+    assert res.detection.outliers.range_m.size > 0
+    assert np.all(res.attributes["range_m"] >= lo)
+
+
+@pytest.mark.parametrize("distance_m", [0.3, 0.5, 0.9])
+def test_a_1_cm_plate_under_a_metre_away_gives_a_point_in_every_lit_pixel(distance_m):
+    """Its band-limited echo rises within the filter's reach of the gate's opening: the
+    comparator still sees it rise (P_d 0.99999 predicted; zero points before issue 25)."""
+    scene = with_overrides(
+        Scene(),
+        {
+            "pixels": 16,
+            "target.mesh": "plate",
+            "target.size_m": 0.01,
+            "distance_m": distance_m,
+            "fidelity.noise_model": "montecarlo",
+        },
+    )
+    res = simcore.simulate(scene)
+    d = res.detection
+    assert len(d.detected) > 0 and d.detected.all()
+    np.testing.assert_allclose(d.range_m, d.range_true_m, atol=0.05)
+
+
+def test_a_lidar_inside_a_target_whose_walls_lie_beyond_the_gate_says_so():
+    s = simcore.simulate(
+        with_overrides(Scene(), {"pixels": 16, "target.mesh": "cube", "target.size_m": 1e4})
+    ).summary()
+    assert s["n_lit_pixels"] > 0 and s["n_target_points"] == 0
+    assert s["p_detect_mean"] == 0.0
+    assert any("outside the range gate" in line for line in s["warnings"])
+
+
+# -- bad input: a mesh with zero-area faces ------------------------------------------------------
+DEGENERATE_OBJ = """\
+v -1 -1 0
+v 1 -1 0
+v 1 1 0
+v -1 1 0
+v 0 0 0
+v 2 2 0
+f 1 2 3
+f 1 3 4
+f 1 1 2
+f 1 5 3
+f 5 5 5
+f 1 3 6
+"""
+
+
+@pytest.mark.parametrize("kind", ["lm_apd", "gm_apd"])
+def test_a_mesh_with_zero_area_faces_gives_finite_summary_figures(tmp_path, kind):
+    mesh = tmp_path / "degenerate.obj"
+    mesh.write_text(DEGENERATE_OBJ)
+    scene = with_overrides(
+        Scene(),
+        {"pixels": 16, "target.mesh": str(mesh), "distance_m": 20.0, "receiver.kind": kind},
+    )
+    s = simcore.simulate(scene).summary()
+    assert s["n_target_points"] > 0
+    numbers = list(_numbers({k: v for k, v in s.items() if k != "scene"}))
+    assert numbers and all(math.isfinite(v) for _, v in numbers)
+    assert s["p_detect_mean"] is not None and s["range_sigma_m_median"] is not None
+
+
+def _numbers(value, path="summary"):
+    if isinstance(value, dict):
+        for k, v in value.items():
+            yield from _numbers(v, f"{path}.{k}")
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            yield from _numbers(v, f"{path}[{i}]")
+    elif isinstance(value, (int, float)) and not isinstance(value, bool):
+        yield path, value

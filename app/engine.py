@@ -7,6 +7,8 @@ material drop-downs and its mesh is sent to the 3D view once).
 
 from __future__ import annotations
 
+import ctypes
+import functools
 import hashlib
 import time
 from collections.abc import Callable
@@ -26,6 +28,53 @@ from simcore.receivers.gm_limits import BYTES_PER_EVENT, MAX_EVENTS
 # 8 M avalanches is about 10 s and 0.8 GB, the most one student's frame may take. One pixel's
 # avalanches in one gate are bounded by the core's own limit.
 MAX_FRAME_AVALANCHES = 8_000_000
+
+# The memory one frame takes above what the engine holds, at most, per sub-ray of the base grid
+# and per pixel (the refinement of mixed pixels, the per-pixel arrays), bounding the peaks
+# measured on the paper scene with the target filling the frame (2026-11-26; the arrays' traced
+# peak, tests/support/frame_memory.py; the resident peak is 0.6-1.2 times it): reference preset
+# (64 sub-rays) 64 px 51 MB, 128 px 204 MB (184 MB at 60 m), 256 px about 785 MB resident;
+# interactive 256 px 36 MB, 512 px about 139 MB resident. The estimate is 1.7-1.9 times the
+# traced peaks (tests/app/test_app_memory.py checks two frames against their measured peak).
+FRAME_BYTES_PER_SUBRAY = 330
+FRAME_BYTES_PER_PIXEL = 600
+MIB = 2**20
+FRAME_BUDGET_BYTES = 1536 * MIB  # one frame of one session, by default
+
+
+def frame_bytes(scene: simcore.Scene) -> int:
+    """The most memory ``scene``'s frame takes above the engine's own [bytes] (an estimate made
+    before any stage runs; see FRAME_BYTES_PER_SUBRAY)."""
+    n_pixels = scene.detector.pixels**2
+    return n_pixels * (FRAME_BYTES_PER_SUBRAY * scene.fidelity.subrays + FRAME_BYTES_PER_PIXEL)
+
+
+def release_free_memory() -> None:
+    """Hand the C heap's free pages back to the system (glibc's ``malloc_trim``; elsewhere
+    nothing): a heavy frame's temporaries otherwise stay in the process (256 px at the reference
+    preset, the next small frame: 349 MB resident, 279 MB after the trim; 2026-11-26)."""
+    trim = _malloc_trim()
+    if trim is not None:
+        trim(0)
+
+
+@functools.cache
+def _malloc_trim():
+    try:
+        return ctypes.CDLL("libc.so.6").malloc_trim
+    except (OSError, AttributeError):
+        return None
+
+
+def check_memory(scene: simcore.Scene, budget_bytes: int) -> None:
+    """Raise FrameRefused if ``scene``'s frame would take more than ``budget_bytes``."""
+    need = frame_bytes(scene)
+    if need > budget_bytes:
+        raise FrameRefused(
+            f"this frame would take about {need / 1e9:.2g} GB of memory (at most "
+            f"{budget_bytes / 1e9:.2g} GB per frame here): lower the Pixels, or choose a "
+            "fidelity preset with fewer sub-rays per pixel"
+        )
 
 
 class FrameRefused(ValueError):
@@ -121,8 +170,16 @@ class Preview:
 class Engine:
     """Owns the Pipeline (worker thread only) and the target's static display data."""
 
-    def __init__(self, scene: simcore.Scene, model: simcore.TargetModel | None = None):
-        """``model``: the scene's target if already loaded (else it is loaded here)."""
+    def __init__(
+        self,
+        scene: simcore.Scene,
+        model: simcore.TargetModel | None = None,
+        frame_budget_bytes: int = FRAME_BUDGET_BYTES,
+    ):
+        """``model``: the scene's target if already loaded (else it is loaded here);
+        ``frame_budget_bytes``: a frame estimated to take more memory is refused before it runs
+        (frame_bytes)."""
+        self.frame_budget_bytes = frame_budget_bytes
         self.model = model if model is not None else simcore.load_target(scene.target)
         self.frame = scene3d.display_frame(self.model)
         self.pipeline = simcore.Pipeline()
@@ -147,6 +204,7 @@ class Engine:
         pipeline checks it between stages (simcore.Cancelled), and again before the views.
         """
         t0 = time.perf_counter()
+        check_memory(request.scene, self.frame_budget_bytes)
 
         def should_stop() -> bool:
             check_budget(self.pipeline, request.scene)
@@ -180,6 +238,7 @@ class Engine:
             timings_s=dict(result.timings_s),
             request=request,
         )
+        release_free_memory()
         return frame
 
     @staticmethod
@@ -201,6 +260,7 @@ class Engine:
 
         Raises StaleRequest like :meth:`compute`.
         """
+        check_memory(request.scene, self.frame_budget_bytes)  # no preview of a refused frame
         scene = self.preview_scene(request.scene)
 
         def should_stop() -> bool:

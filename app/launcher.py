@@ -543,7 +543,9 @@ class Launcher:
     async def start_child(self) -> Child:
         """Start one app process and wait until it listens. Raises StartFailed."""
         token = secrets.token_urlsafe(32)
-        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        # two malloc arenas: each thread's own (64 MB of address space apiece) would eat the
+        # session's address-space limit (app.main.limit_address_space) without using memory
+        env = {**os.environ, "PYTHONUNBUFFERED": "1", "MALLOC_ARENA_MAX": "2"}
         proc = await asyncio.create_subprocess_exec(
             *self.command(self.scene, self.options),
             stdin=asyncio.subprocess.PIPE,

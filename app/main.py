@@ -20,7 +20,7 @@ from trame.app import get_server
 
 import simcore
 from app import connections, security
-from app.engine import Engine
+from app.engine import FRAME_BUDGET_BYTES, Engine
 from app.logic import flyaround, parts, studies
 from app.logic.controller import AppLogic
 from app.state import STATE_KEYS
@@ -37,11 +37,12 @@ class LmapdApp:
         scene: simcore.Scene | None = None,
         server=None,
         engine: Engine | None = None,
+        frame_budget_bytes: int = FRAME_BUDGET_BYTES,
         **logic_options,
     ):
         self.scene = scene if scene is not None else simcore.load_scene()
         self.server = server or get_server(f"lmapd-{next(_server_ids)}", client_type="vue3")
-        self.engine = engine or Engine(self.scene)
+        self.engine = engine or Engine(self.scene, frame_budget_bytes=frame_budget_bytes)
         self.logic = AppLogic(self.server, self.engine, self.scene, **logic_options)
         self.uploads = self.logic.uploads  # the upload controls (a child of the logic)
         self.ui = build_layout(self.server)
@@ -242,6 +243,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="a session whose page has been closed this long ends (default 60 s)",
     )
     parser.add_argument(
+        "--frame-memory-mb",
+        type=float,
+        default=FRAME_BUDGET_BYTES / 2**20,
+        help="a frame estimated to take more memory is refused before it runs; each tab's "
+        "session process is limited to its size after start plus this and 1 GB of headroom "
+        f"(default {FRAME_BUDGET_BYTES / 2**20:g} MB)",
+    )
+    parser.add_argument(
         "--public-url",
         action="append",
         default=[],
@@ -284,6 +293,28 @@ def read_token_and_watch_stdin() -> str:
     return token
 
 
+HEADROOM_BYTES = 2**30  # a session's address space beyond its size at start and its frame budget
+
+
+def limit_address_space(extra_bytes: int) -> int | None:
+    """Limit this process's address space (``RLIMIT_AS``) to its size now plus ``extra_bytes``:
+    an allocation beyond fails (MemoryError) in this process only. The limit [bytes], or None
+    where it cannot be set."""
+    import resource  # noqa: PLC0415  (sessions only)
+
+    import psutil  # noqa: PLC0415
+
+    try:
+        limit = int(psutil.Process().memory_info().vms) + int(extra_bytes)
+        hard = resource.getrlimit(resource.RLIMIT_AS)[1]
+        if hard != resource.RLIM_INFINITY:
+            limit = min(limit, hard)
+        resource.setrlimit(resource.RLIMIT_AS, (limit, hard))
+    except (ValueError, OSError, psutil.Error):
+        return None
+    return limit
+
+
 def _interrupt(*_) -> None:
     raise KeyboardInterrupt
 
@@ -311,6 +342,7 @@ def run_launcher(args: argparse.Namespace) -> int:
         return 2
     token = secrets.token_urlsafe(32)
     options = ("--no-preview",) if args.no_preview else ()
+    options += ("--frame-memory-mb", f"{args.frame_memory_mb:g}")
     if args.studies:
         options += ("--studies", os.path.abspath(args.studies))
     origins = tuple(args.public_url)
@@ -357,7 +389,13 @@ def main(argv: list[str] | None = None) -> int:
     try:
         token = read_token_and_watch_stdin() if args.token_stdin else None
         scene = simcore.load_scene(args.scene)
-        app = LmapdApp(scene, previews=not args.no_preview, studies_dir=args.studies)
+        budget = int(max(1.0, args.frame_memory_mb) * 2**20)
+        app = LmapdApp(
+            scene,
+            previews=not args.no_preview,
+            studies_dir=args.studies,
+            frame_budget_bytes=budget,
+        )
     except (simcore.SceneError, simcore.TargetError, OSError, ValueError) as exc:
         print(f"lmapd app: {exc}", file=sys.stderr)
         return 2
@@ -366,5 +404,6 @@ def main(argv: list[str] | None = None) -> int:
     if token is not None:
         app.token = token
         signal.signal(signal.SIGTERM, _interrupt)  # the launcher stops its sessions gracefully
+        limit_address_space(budget + HEADROOM_BYTES)  # one session cannot take the machine
     origins = tuple(args.public_url)
     return serve_until_stopped(lambda: app.start(args.host, args.port, origins=origins), args)

@@ -30,6 +30,8 @@ class PixelSelection:
         # the image's zoom (scale s >= 1, top-left corner x, y in image fractions): page-side only
         state.array_zoom = {"s": 1, "x": 0, "y": 0}
         state.client_only("array_zoom")
+        state.array_cursor = None  # the keyboard's cursor pixel on the image (app.ui.panels)
+        state.client_only("array_cursor")
 
     def current(self) -> tuple:
         """The selection the page holds, as (row, col) tuples."""

@@ -11,7 +11,7 @@ from trame.widgets import vuetify3 as v3
 import simcore
 from app.logic.scene_map import preset_text
 from app.state import PRESET_CHOICES, SPECS, SUBRAY_CHOICES, ControlSpec
-from app.ui import design, flyaround, lessons
+from app.ui import design, flyaround, glossary, lessons
 from app.ui.upload import upload_panel
 from app.ui.widgets import a11y_attributes, button_toggle, html_attributes, labelled_toggle
 
@@ -49,15 +49,19 @@ def slider(key: str) -> None:
         digits = 3
         model = (f"Math.log10(Math.max({key}, 1e-12))",)
         update = f"{key} = Number((10 ** $event).toPrecision({digits}))"
+        # (the keys step a hundredth of a decade, Page a tenth: app.ui.classroom)
         bounds = {"min": math.log10(spec.lo), "max": math.log10(spec.hi), "step": 0.001}
     else:
         model = (key,)
         update = f"{key} = $event"
         bounds = {"min": spec.lo, "max": spec.hi, "step": spec.step}
     with html.Div(
-        classes=f"control control-{key}", **a11y_attributes(spec.label, spec.unit, spec.log_slider)
+        classes=f"control control-{key}",
+        **a11y_attributes(spec.label, spec.unit, spec.log_slider, key),
     ):
-        html.Div(_label(spec), classes="control-label text-body-2")
+        with html.Div(classes="control-label text-body-2 d-flex align-center"):
+            html.Span(_label(spec))
+            glossary.info_button(key, spec.label)
         with v3.VSlider(
             model_value=model,
             update_modelValue=update,

@@ -7,7 +7,7 @@ from trame.ui.vuetify3 import VAppLayout
 from trame.widgets import client, html
 from trame.widgets import vuetify3 as v3
 
-from app.ui import controls, design, lessons, panels, views3d
+from app.ui import classroom, controls, design, glossary, lessons, panels, views3d
 from app.ui.widgets import html_attributes
 
 # After the page applied a frame, wait until it is on screen, then tell the server (frame pacing)
@@ -64,6 +64,8 @@ A11Y_SCRIPT = """
   const spoken = (box, thumb) => {
     let v = Number(thumb.getAttribute('aria-valuenow'));
     if (box.dataset.a11yLog === '1') v = Number((10 ** v).toPrecision(3));
+    const key = box.dataset.stateKey, held = key ? Number(window.trame.state.get(key)) : NaN;
+    if (Number.isFinite(held)) v = held;  // the value itself, not the thumb's rounded place
     const unit = box.dataset.a11yUnit;
     return `${Number(v.toPrecision(6))}${unit ? ' ' + unit : ''}`;
   };
@@ -270,6 +272,7 @@ def app_bar() -> None:
                 classes="text-body-2 d-none d-md-inline",
             )
         v3.VSpacer()
+        glossary.glossary_button()
         v3.VChip(
             "{{ n_points.toLocaleString() }} points",
             size="small",
@@ -365,6 +368,9 @@ def build_layout(server) -> VAppLayout:
     # narrow one (below the md breakpoint, 960 px, it opens over the views and closes on a tap
     # outside: Vuetify's temporary drawer)
     server.state.client_only("main_drawer")
+    server.state.glossary_open = False  # the glossary dialog, and the entry asked for
+    server.state.glossary_term = ""
+    server.state.client_only("glossary_open", "glossary_term")
     with VAppLayout(server, full_height=True) as layout:
         client.Style(CSS)
         client.Script(FRAME_SCRIPT)  # before the watcher below: created first
@@ -372,6 +378,10 @@ def build_layout(server) -> VAppLayout:
         client.Script(A11Y_SCRIPT)
         client.Script(LINK_SCRIPT)
         client.Script(VIEW_SCROLL_SCRIPT)
+        client.Script(classroom.KEYBOARD_SCRIPT)
+        client.Style(classroom.CURSOR_CSS)
+        client.Style(glossary.CSS)
+        glossary.glossary_dialog()
         client.ClientStateChange(value="frame_key", change=FRAME_SHOWN, trigger_on_create=True)
         app_bar()
         with v3.VNavigationDrawer(

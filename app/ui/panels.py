@@ -69,16 +69,17 @@ DRAG = (
 )
 DRAG_END = "$event.currentTarget.dataset.drag = ''"
 LEAVE = "$event.currentTarget.dataset.drag = ''; $event.currentTarget.dataset.active = ''"
-# Keys on the focused image: arrows pan, + and - zoom about the centre, 0 resets.
+# Keys on the focused image (app.ui.classroom.KEYBOARD_SCRIPT): arrows move a cursor pixel (the
+# zoomed view follows it), Enter selects it, Shift+Enter adds it; Ctrl + arrows pan, + and - zoom
+# about the centre, 0 resets.
 KEYS = (
-    "array_zoom = ((e, z) => { const d = 0.2 / z.s, m = 1 - 1 / z.s, "
-    "c = (v) => Math.min(m, Math.max(0, v)), "
-    "moves = { ArrowLeft: [-d, 0], ArrowRight: [d, 0], ArrowUp: [0, -d], ArrowDown: [0, d] }; "
-    "if (moves[e.key]) { e.preventDefault(); "
-    "return { s: z.s, x: c(z.x + moves[e.key][0]), y: c(z.y + moves[e.key][1]) }; } "
-    f"if (e.key === '+' || e.key === '=') return {ZOOM}(z, 1.5, 0.5, 0.5); "
-    f"if (e.key === '-' || e.key === '_') return {ZOOM}(z, 1 / 1.5, 0.5, 0.5); "
-    "if (e.key === '0') return { s: 1, x: 0, y: 0 }; return z; })($event, array_zoom)"
+    "void ((r) => { array_zoom = r[0]; array_cursor = r[1]; })(trame.utils.lmapdArray.key("
+    "$event, array_zoom, array_cursor, array_image.pixels, selected_pixels))"
+)
+CURSOR_STYLE = (
+    "{ left: ((array_cursor[1] + 0.5) / array_image.pixels * 100) + '%', "
+    "top: ((array_cursor[0] + 0.5) / array_image.pixels * 100) + '%', "
+    "width: (100 / array_image.pixels) + '%', height: (100 / array_image.pixels) + '%' }"
 )
 # The zoomed image is laid out at its zoomed size (not scaled by a CSS transform, which would
 # scale the image as drawn at the box's size: its pixel edges rounded there, up to half a pixel
@@ -125,8 +126,9 @@ def array_card() -> None:
             )
         with html.Div(classes="d-flex align-center px-4"):
             html.Div(
-                "Click a pixel to see its echo; shift-click adds more. Ctrl + wheel (or click, "
-                "then wheel), drag, arrows, + / − zoom and pan.",
+                "Click a pixel to see its echo; shift-click adds more (keys: arrows move a "
+                "cursor, Enter selects, Shift+Enter adds). Ctrl + wheel (or click, then wheel), "
+                "drag, Ctrl + arrows, + / − zoom and pan.",
                 classes="hint text-caption",
             )
             v3.VSpacer()
@@ -155,7 +157,8 @@ def array_card() -> None:
             keydown=KEYS,
             **html_attributes(
                 role="group",
-                aria_label="Detector array image: arrow keys pan, plus and minus zoom, 0 resets",
+                aria_label="Detector array image: arrow keys move the cursor pixel, Enter "
+                "selects it, Shift+Enter adds it; Ctrl+arrows pan, plus and minus zoom, 0 resets",
             ),
         ):
             with html.Div(classes="array-zoom", style=ZOOM_STYLE):
@@ -168,6 +171,11 @@ def array_card() -> None:
                     click=PIXEL_CLICK,
                     mousemove=PIXEL_HOVER,
                     mouseleave=HOVER_END,
+                )
+                html.Div(
+                    v_if="array_cursor && array_cursor[0] < array_image.pixels",
+                    classes="array-cursor",
+                    style=(CURSOR_STYLE,),
                 )
                 html.Div(
                     v_for="(p, i) in selected_pixels",

@@ -17,12 +17,17 @@ def html_attributes(**attrs: str) -> dict:
     return {**attrs, "__properties": [(key, key.replace("_", "-")) for key in attrs]}
 
 
-def a11y_attributes(name: str, unit: str = "", log_scale: bool = False) -> dict:
+def a11y_attributes(
+    name: str, unit: str = "", log_scale: bool = False, state_key: str = ""
+) -> dict:
     """The data attributes from which the page's accessibility script names a control's slider
-    and number field and speaks the slider's value with its unit (app.ui.layout.A11Y_SCRIPT)."""
+    and number field and speaks the slider's value with its unit (app.ui.layout.A11Y_SCRIPT);
+    a log slider's state key lets its Page keys step a tenth of a decade
+    (app.ui.classroom.KEYBOARD_SCRIPT)."""
     attrs = {"data_a11y_name": name, "data_a11y_unit": SPOKEN_UNITS.get(unit, unit)}
     if log_scale:
         attrs["data_a11y_log"] = "1"
+        attrs["data_state_key"] = state_key
     return html_attributes(**attrs)
 
 

@@ -63,10 +63,16 @@ def test_every_control_has_an_accessible_name_in_both_modes(page, app_url):
     wait_settled(page)
     open_every_panel(page)
     page.locator(".sun-manual").click()  # the Sun's sliders and the filter
+    page.wait_for_timeout(400)
+    sunny = controls_in_tree(page)
+    # (by day the default Geiger-mode frame is over the server's budget and refused: the
+    # Geiger-mode parameters are looked at by night)
+    page.locator(".sun-none").click()
     page.locator(".receiver-gm").click()  # the Geiger-mode parameters
     page.wait_for_timeout(400)
     single = controls_in_tree(page)
-    assert {"Sun azimuth", "Dead time"} <= {c["name"] for c in single if c["role"] == "slider"}
+    assert "Sun azimuth" in {c["name"] for c in sunny if c["role"] == "slider"}
+    assert "Dead time" in {c["name"] for c in single if c["role"] == "slider"}
     page.locator(".receiver-lm").click()
     page.locator(".sun-none").click()
     wait_settled(page)
@@ -76,7 +82,7 @@ def test_every_control_has_an_accessible_name_in_both_modes(page, app_url):
     page.locator(".mode-single").click()
     wait_settled(page)
     assert len(single) > 30 and any(c["role"] == "slider" for c in flying)
-    unnamed = [c for c in single + flying if not c["name"]]
+    unnamed = [c for c in sunny + single + flying if not c["name"]]
     assert unnamed == []
 
 

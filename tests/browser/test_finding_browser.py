@@ -107,14 +107,14 @@ def test_multi_peak_mode_zoom_hover_and_click(page, finding_url, artifacts_dir):
     page.mouse.wheel(0, 100)  # the image was clicked: the wheel alone zooms it now
     page.wait_for_function("(s) => window.trame.state.get('array_zoom').s < s", arg=moved["s"])
 
-    # keys on the focused image: 0 resets, + zooms about the centre, arrows pan
+    # keys on the focused image: 0 resets, + zooms about the centre, Ctrl + arrows pan
     page.locator(".array-box").focus()
     page.keyboard.press("0")
     assert state(page, "array_zoom") == {"s": 1, "x": 0, "y": 0}
     page.keyboard.press("+")
     assert state(page, "array_zoom")["s"] == pytest.approx(1.5)
     x0 = state(page, "array_zoom")["x"]
-    page.keyboard.press("ArrowRight")
+    page.keyboard.press("Control+ArrowRight")
     assert state(page, "array_zoom")["x"] > x0
     page.get_by_role("button", name="Reset zoom").click()
     assert state(page, "array_zoom") == {"s": 1, "x": 0, "y": 0}

@@ -1,0 +1,160 @@
+"""The words of the page explained: a glossary (TNR, SNR, P_d, FWHM, CFD, pile-up, ...) with an
+info button beside every control that opens the entries it needs, and the whole glossary in a
+dialog from the app bar."""
+
+from __future__ import annotations
+
+from trame.widgets import html
+from trame.widgets import vuetify3 as v3
+
+from app.ui.widgets import html_attributes
+
+# term -> what it means here, in a sentence or two a student can read at the slider
+GLOSSARY: dict[str, str] = {
+    "TNR": "Threshold-to-noise ratio: the detection threshold as a multiple of the noise's "
+    "standard deviation σn. A pixel gives a point when its signal crosses TNR × σn: a higher "
+    "TNR means fewer false alarms and more missed echoes. In Geiger mode it sets the count "
+    "threshold's false-alarm rate.",
+    "SNR": "Signal-to-noise ratio: the echo's peak power over the noise's standard deviation "
+    "σn, in one flash (linear mode). A pixel needs an SNR above about the TNR to be detected. "
+    "Geiger mode: the count SNR S/√(S+B), the echo's expected counts S in the peak window over "
+    "the square root of those plus the background's B, over the frame's pulses.",
+    "P_d": "Probability of detection: the chance that a pixel's echo crosses the threshold in "
+    "this flash. An echo with P_d 0.90 is still missed one flash in ten, by chance (the noise "
+    "pulled it under the threshold); the seed decides which.",
+    "FWHM": "Full width at half maximum: a pulse's duration between the two times it is at half "
+    "of its peak power.",
+    "CFD": "Constant-fraction discriminator: times an echo where it reaches a fixed fraction of "
+    "its own peak (a delayed copy minus a scaled copy crosses zero), so the time does not move "
+    "with the echo's strength.",
+    "Half-maximum time": "The time at which the echo first reaches half of its peak (◆ on the "
+    "chart): the linear-mode range is c t / 2 from it.",
+    "Pile-up": "Geiger mode: after an avalanche a pixel is dead for the dead time, so with "
+    "several photons per pulse only the earliest are counted; the histogram leans to the "
+    "echo's onset and the range comes out short.",
+    "Dead time": "Geiger mode: the time after an avalanche during which a pixel cannot fire "
+    "again (it is re-armed at each gate).",
+    "Dark count": "Geiger mode: an avalanche with no photon (thermal or tunnelling), at the dark "
+    "count rate; it looks like a background photon.",
+    "PDE": "Photon detection efficiency: the share of the photons reaching a Geiger-mode pixel "
+    "that set off an avalanche.",
+    "Pulses per frame": "Geiger mode: a frame sums the counts of this many laser pulses into "
+    "each pixel's histogram; more pulses, more counts and a longer frame.",
+    "Transmit attenuation": "Geiger mode: the pulse energy is cut by this many decibels (10 dB: "
+    "a tenth) so that the pixels see under one photoelectron per pulse and do not pile up.",
+    "Outlier": "A false alarm: a point from noise crossing the threshold where there is no echo "
+    "(red in the point cloud).",
+    "Range": "The distance along a pixel's line of sight, c t / 2 from the echo's time t since "
+    "the pulse left.",
+    "Pose": "The target's attitude seen from the lidar: pitch and azimuth turn it, the distance "
+    "moves it along the line of sight.",
+    "Pixel": "One detector element of the square array: it sees a small cone of the field of "
+    "view and gives at most one point (a mixed pixel sees two surfaces).",
+    "Pulse energy": "The laser energy of one flash: the received power and the SNR scale with it.",
+    "Background light": "Sunlight scattered by the target and the Earth into the receiver: its "
+    "shot noise adds to the noise (linear mode), its photons to the counts (Geiger mode).",
+    "Filter width": "The band-pass filter in front of the detector: a narrower filter lets in "
+    "less background light.",
+    "Seed": "The number the random draws start from: the same seed gives the same noise, the "
+    "same points.",
+    "Fidelity": "How finely the rays sample each pixel (sub-rays) and how the noise is modelled: "
+    "finer is truer and slower.",
+}
+
+# each control's entries, first the one it sets
+CONTROL_TERMS: dict[str, tuple[str, ...]] = {
+    "pitch_deg": ("Pose",),
+    "azimuth_deg": ("Pose",),
+    "distance_m": ("Range", "Pose"),
+    "pixels": ("Pixel",),
+    "pulse_energy_mj": ("Pulse energy", "SNR"),
+    "tnr": ("TNR", "SNR", "P_d"),
+    "seed": ("Seed", "P_d"),
+    "sun_azimuth_deg": ("Background light",),
+    "sun_elevation_deg": ("Background light",),
+    "filter_width_nm": ("Filter width", "Background light"),
+    "gm_pde": ("PDE",),
+    "gm_dark_count_rate_hz": ("Dark count",),
+    "gm_dead_time_ns": ("Dead time", "Pile-up"),
+    "gm_pulses": ("Pulses per frame",),
+    "gm_attenuation_db": ("Transmit attenuation", "Pile-up"),
+    "receiver_kind": ("SNR", "Pile-up"),
+    "sun_mode": ("Background light",),
+    "preset": ("Fidelity",),
+    "color_by": ("Range", "SNR", "Outlier"),
+}
+
+
+def control_text(key: str) -> str:
+    """The glossary entries of control ``key``, one paragraph each."""
+    return "\n\n".join(f"{term}: {GLOSSARY[term]}" for term in CONTROL_TERMS[key])
+
+
+def info_button(key: str, name: str) -> None:
+    """A small info button beside control ``key`` (``name``: its label): its glossary entries
+    in a tooltip on hover or keyboard focus; a click opens the glossary at its first term."""
+    with v3.VTooltip(location="top", max_width=360, open_on_focus=True):
+        with v3.Template(v_slot_activator="{ props }"):
+            v3.VBtn(
+                icon="mdi-information-outline",
+                v_bind="props",
+                size="x-small",
+                density="compact",
+                variant="text",
+                color="primary",
+                click=f"glossary_term = '{CONTROL_TERMS[key][0]}'; glossary_open = true",
+                classes=f"info-button info-{key}",
+                **html_attributes(aria_label=f"What is {name}?"),
+            )
+        html.Div(control_text(key), classes="glossary-tip", style="white-space: pre-line")
+
+
+def glossary_button() -> None:
+    """The app bar's button that opens the glossary."""
+    v3.VBtn(
+        icon="mdi-book-alphabet",
+        color="white",
+        variant="text",
+        size="small",
+        click="glossary_term = ''; glossary_open = true",
+        title="Glossary: the words of the page",
+        classes="glossary-button",
+        **html_attributes(aria_label="Glossary"),
+    )
+
+
+def glossary_dialog() -> None:
+    """Every entry, the one asked for first and marked."""
+    with v3.VDialog(v_model=("glossary_open", False), max_width=640, scrollable=True):
+        with v3.VCard(classes="glossary-card", **html_attributes(aria_label="Glossary")):
+            with v3.VCardTitle(classes="card-title d-flex align-center"):
+                html.Span("Glossary")
+                v3.VSpacer()
+                v3.VBtn(
+                    icon="mdi-close",
+                    size="small",
+                    variant="text",
+                    click="glossary_open = false",
+                    **html_attributes(aria_label="Close the glossary"),
+                )
+            with v3.VCardText():
+                with html.Dl(classes="glossary-list"):
+                    for term, text in GLOSSARY.items():
+                        with html.Div(
+                            classes=(
+                                f"['glossary-entry', glossary_term === '{term}' ? "
+                                "'glossary-asked' : '']",
+                            ),
+                            style=(f"{{ order: glossary_term === '{term}' ? -1 : 0 }}",),
+                        ):
+                            html.Dt(term, classes="glossary-term")
+                            html.Dd(text, classes="glossary-text")
+
+
+CSS = """
+.glossary-list { display: flex; flex-direction: column; gap: 6px; }
+.glossary-term { font-weight: 600; color: #0d47a1; }
+.glossary-text { margin: 0 0 2px 0; font-size: 0.88rem; line-height: 1.45; }
+.glossary-asked { background: #fff8e1; border-radius: 4px; padding: 2px 6px; }
+.info-button.v-btn { margin-left: 2px; }
+"""

@@ -59,6 +59,14 @@ class Pipeline:
     def clear(self) -> None:
         self._cache.clear()
 
+    def adopt(self, other: Pipeline, stages: tuple[str, ...] = ("target",)) -> None:
+        """Take ``other``'s cached outputs of ``stages`` (read-only, so they can be shared by
+        pipelines of one thread: a target's mesh and BVH loaded once for several of them); a
+        stage whose key differs is computed again as usual."""
+        for name in stages:
+            if name in other._cache and name not in self._cache:
+                self._cache[name] = other._cache[name]
+
     def run(
         self,
         scene: Scene,

@@ -77,8 +77,17 @@ def _point_pipeline(slot: int) -> Pipeline:
         set_threads(1)  # the workers run side by side, one frame per core (as a sweep's)
         pipes = _LOCAL.pipelines = {}
     if slot not in pipes:
-        pipes[slot] = Pipeline()
+        pipes[slot] = _new_pipeline(pipes)
     return pipes[slot]
+
+
+def _new_pipeline(pipes: dict[int, Pipeline]) -> Pipeline:
+    """A Pipeline for another envelope point, sharing the target (mesh and BVH) already loaded
+    for the others of this thread."""
+    pipe = Pipeline()
+    if pipes:
+        pipe.adopt(next(iter(pipes.values())), ("target", "rays"))
+    return pipe
 
 
 def _point_task(scene: Scene, slot: int, quality: bool) -> PointOutcome:
@@ -124,7 +133,9 @@ class Evaluator:
     def evaluate(self, jobs: Sequence[tuple[Any, Scene, int]]) -> Iterator:
         if self.client is None:
             for key, scene, point in jobs:
-                pipe = self._pipes.setdefault(point, Pipeline())
+                if point not in self._pipes:
+                    self._pipes[point] = _new_pipeline(self._pipes)
+                pipe = self._pipes[point]
                 yield key, point, run_point(scene, pipe, self.quality)
             return
         yield from self._dask(jobs)

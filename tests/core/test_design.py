@@ -195,6 +195,8 @@ def test_a_study_writes_its_table_front_best_scene_figures_and_report(tmp_path):
     assert "The binding requirement is" in report and "stages reused" in report
     # a design that changes only the TNR and energy re-runs neither the ray cast nor the echoes
     assert result.tally.reused["hits"] > 0 and result.tally.reused["echo"] > 0
+    # the envelope points' pipelines share one target (mesh and BVH): loaded once
+    assert result.tally.computed["target"] == 1
 
 
 def test_a_study_no_design_can_meet_says_which_requirement_fails_and_by_how_much(tmp_path):

@@ -1,8 +1,9 @@
 """``lmapd bench``: the stage timings on the MRO (``stages``), with ``--tradeoff`` each fidelity
 preset's time against its error (``tradeoff``), with ``--startup`` the phases of ``lmapd simulate``
-in fresh processes (``startup``).
+in fresh processes (``startup``), with ``--design`` a design study's wall time (``design``).
 
-    lmapd bench [--quick] [--json FILE] [--tradeoff --out DIR [--pixels N] | --startup]
+    lmapd bench [--quick] [--json FILE] [--tradeoff --out DIR [--pixels N] | --startup |
+                --design [--trials N] [--workers N]]
 
 The modules load the imaging chain; they are imported when the command runs, not at ``--help``.
 """
@@ -31,6 +32,16 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
         help="lmapd simulate's import, target load, BVH build, first frame and write times, "
         "in fresh processes (median and range)",
     )
+    bench.add_argument(
+        "--design",
+        action="store_true",
+        help="the built-in design study's wall time (200 trials x 8 envelope points at "
+        "128 x 128; 20 trials with --quick) and its stage reuse",
+    )
+    bench.add_argument("--trials", type=int, help="designs to screen for --design")
+    bench.add_argument(
+        "--workers", type=int, default=2, help="Dask workers for --design (default 2)"
+    )
     bench.add_argument("--out", help="folder for tradeoff.json and tradeoff.png")
     bench.add_argument(
         "--pixels",
@@ -43,8 +54,18 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
 
 def run_cli(args: argparse.Namespace) -> int:
     """Run ``lmapd bench``; the exit status (0). User errors raise CliError."""
-    if args.tradeoff and args.startup:
-        raise CliError("--tradeoff and --startup are two benches: run one at a time")
+    if sum((args.tradeoff, args.startup, args.design)) > 1:
+        raise CliError("--tradeoff, --startup and --design are three benches: run one at a time")
+    if args.design:
+        if args.trials is not None and args.trials < 1:
+            raise CliError(f"--trials {args.trials}: give at least 1")
+        if args.workers < 0:
+            raise CliError(f"--workers {args.workers}: give a number >= 0")
+        from . import design  # noqa: PLC0415  (the imaging chain, optuna, Dask)
+
+        return design.main(args.quick, args.json, args.trials, args.workers)
+    if args.trials is not None:
+        raise CliError("--trials is for --design")
     if args.startup:
         if args.pixels is not None or args.out:
             raise CliError("--startup runs the paper scene: it takes no --pixels or --out")

@@ -517,7 +517,7 @@ class AppLogic:
             "waveforms": waveforms,
             "view_text": waveforms_payload.view_text(frame.result.scene.receiver.kind),
             "snr_hist": frame.snr_histogram,
-            "stats": frame.stats,
+            "stats": stats.with_chance_misses(frame.stats, frame.result),
             "quality_rows": [],  # the frame shown has not been scored yet
             "stages": stats.stage_rows(
                 frame.timings_s,

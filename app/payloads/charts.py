@@ -112,3 +112,13 @@ def range_axis(layout: dict, lo_ns: float, hi_ns: float) -> dict:
         "showlegend": False,
         "hoverinfo": "skip",
     }
+
+
+def detection_text(w) -> str:
+    """What became of a pixel's echo this frame: its range, or why it gave no point (a likely
+    echo missed by chance, or one too weak for the threshold)."""
+    if w.detected and math.isfinite(w.range_m):
+        return f"R = {w.range_m:.3f} m"
+    if w.p_detect >= 0.5:
+        return f"not detected: P_d {w.p_detect:.2f}, missed by chance this frame"
+    return f"not detected (P_d {w.p_detect:.2f}: too weak for the threshold)"

@@ -11,7 +11,7 @@ import math
 import numpy as np
 
 import simcore
-from app.payloads.charts import base_layout, note, range_axis, time_axis
+from app.payloads.charts import base_layout, detection_text, note, range_axis, time_axis
 from app.payloads.style import SELECTION_COLORS
 from simcore.constants import C as C_M_S
 from simcore.receivers import gm_pileup
@@ -51,7 +51,8 @@ def photon_figure(result: simcore.Result, selection: list) -> dict:
                 "customdata": _range_m(x_bars).tolist(),
                 "width": gm.bin_s * 1e9,
                 "name": f"({row}, {col}) measured counts"
-                + (f", {elsewhere:,} more elsewhere in the gate" if elsewhere else ""),
+                + (f", {elsewhere:,} more elsewhere in the gate" if elsewhere else "")
+                + ("" if w.detected else f"; {detection_text(w)}"),
                 "marker": {"color": color, "opacity": 0.6},
                 "hovertemplate": "%{x:,.2f} ns (%{customdata:,.2f} m): %{y} counts"
                 "<extra>measured</extra>",

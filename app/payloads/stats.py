@@ -42,6 +42,20 @@ def stats_rows(summary: dict) -> list[dict]:
     ]
 
 
+CHANCE_P_D = 0.5  # a pixel missed with at least this P_d was missed by chance, not too weak
+
+
+def with_chance_misses(rows: list[dict], result: simcore.Result) -> list[dict]:
+    """``rows`` with, after the dropped pixels, how many of them had an echo likely to be
+    detected (P_d >= 0.5): missed by chance this frame (the noise pulled them under the
+    threshold; another seed detects most of them), not for want of signal."""
+    d = result.detection
+    chance = int(np.count_nonzero(~np.asarray(d.detected) & (np.asarray(d.p_detect) >= CHANCE_P_D)))
+    row = {"label": f"Missed by chance (P_d ≥ {CHANCE_P_D:g})", "value": f"{chance:,d}"}
+    at = next((i for i, r in enumerate(rows) if r["label"] == "Dropped pixels (missed)"), None)
+    return rows + [row] if at is None else [*rows[: at + 1], row, *rows[at + 1 :]]
+
+
 def _is_gm(summary: dict) -> bool:
     return summary.get("receiver_kind", "lm_apd") == "gm_apd"
 

@@ -8,7 +8,7 @@ import numpy as np
 
 import simcore
 from app.payloads import encode, photons
-from app.payloads.charts import base_layout, note, range_axis, time_axis, vline
+from app.payloads.charts import base_layout, detection_text, note, range_axis, time_axis, vline
 from app.payloads.style import SELECTION_COLORS
 from simcore.constants import C as C_M_S
 
@@ -85,11 +85,7 @@ def _chart_xy(t_s: np.ndarray, power_w: np.ndarray, delay_s: float, scale_w: flo
 
 def _waveform_traces(w: simcore.Waveform, color: str, scale: float) -> list[dict]:
     """Filtered and raw echo, the delayed emitted pulse and the half-maximum mark of one pixel."""
-    name = f"({w.row}, {w.col})"
-    if w.detected and math.isfinite(w.range_m):
-        name += f" R = {w.range_m:.3f} m"
-    else:
-        name += f" not detected (P_d = {w.p_detect:.2f})"
+    name = f"({w.row}, {w.col}) {detection_text(w)}"
     group = f"px{w.row}_{w.col}"
     t_ns, filtered = _chart_xy(w.t_s, w.filtered_w, 0.0, scale)
     _, raw = _chart_xy(w.t_s, w.power_w, 0.0, scale)

@@ -106,7 +106,10 @@ def info_button(key: str, name: str) -> None:
                 classes=f"info-button info-{key}",
                 **html_attributes(aria_label=f"What is {name}?"),
             )
-        html.Div(control_text(key), classes="glossary-tip", style="white-space: pre-line")
+        for i, term in enumerate(CONTROL_TERMS[key]):
+            with html.Div(classes="glossary-tip" + (" mt-2" if i else "")):
+                html.B(f"{term}: ")
+                html.Span(GLOSSARY[term])
 
 
 def glossary_button() -> None:

@@ -1,0 +1,50 @@
+"""The classroom's words: every control has glossary entries (TNR, SNR, P_d, FWHM, CFD, pile-up
+among them), and a likely echo that gave no point is said to be missed by chance, in the chart's
+legend and in the stats."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from support.app_helpers import change, small_app, stat
+
+from app.state import SPECS
+from app.ui.glossary import CONTROL_TERMS, GLOSSARY
+
+
+def test_every_control_has_glossary_entries_and_the_lessons_words_are_there():
+    assert set(SPECS) <= set(CONTROL_TERMS)
+    assert all(term in GLOSSARY for terms in CONTROL_TERMS.values() for term in terms)
+    for word in ("TNR", "SNR", "P_d", "FWHM", "CFD", "Pile-up", "Dead time", "PDE"):
+        assert GLOSSARY[word]
+    assert CONTROL_TERMS["tnr"][0] == "TNR"
+
+
+@pytest.fixture(scope="module")
+def app():
+    with small_app(pixels=48) as lmapd:
+        yield lmapd
+
+
+def test_a_likely_echo_missed_is_said_to_be_missed_by_chance(app):
+    # low threshold-to-noise margins: many pixels with P_d between 0.5 and 1 that the noise misses
+    change(app, pulse_energy_mj=0.3, distance_m=500, tnr=5.0)
+    result = app.logic.last_frame.result
+    d = result.detection
+    by_chance = ~np.asarray(d.detected) & (np.asarray(d.p_detect) >= 0.5)
+    assert by_chance.any()
+    assert stat(app, "Missed by chance (P_d ≥ 0.5)") == f"{int(by_chance.sum()):,d}"
+    labels = [row["label"] for row in app.state.stats]
+    chance_at = labels.index("Missed by chance (P_d ≥ 0.5)")
+    assert chance_at == labels.index("Dropped pixels (missed)") + 1
+    flat = int(result.echo.pixel[np.flatnonzero(by_chance)[0]])
+    row, col = divmod(flat, result.pixels)
+    app.logic.on_pixel_click(row, col)
+    name = app.state.waveforms["data"][0]["name"]
+    p_d = float(d.p_detect[np.flatnonzero(by_chance)[0]])
+    assert name == f"({row}, {col}) not detected: P_d {p_d:.2f}, missed by chance this frame"
+    weak = ~np.asarray(d.detected) & (np.asarray(d.p_detect) < 0.5)
+    if weak.any():  # one too weak for the threshold is not said to be missed by chance
+        row, col = divmod(int(result.echo.pixel[np.flatnonzero(weak)[0]]), result.pixels)
+        app.logic.on_pixel_click(row, col)
+        assert "too weak for the threshold" in app.state.waveforms["data"][0]["name"]

@@ -101,6 +101,7 @@ class ConnectionGuard:
         self.n_closed_idle = 0
         self.n_evicted = 0
         self.n_refused = 0
+        self.sweeper: asyncio.Task | None = None
         self.log = ShortLog(log)
 
     @property
@@ -213,6 +214,65 @@ async def stop_listening(server: asyncio.Server, sweeper: asyncio.Task) -> None:
     with contextlib.suppress(asyncio.CancelledError):
         await sweeper
     server.close()
+
+
+GUARD_KEY = web.AppKey("lmapd_connection_guard", ConnectionGuard)
+
+
+class GuardedSite(web.TCPSite):
+    """aiohttp's TCP site behind the ConnectionGuard its application carries (``GUARD_KEY``;
+    without one, a plain TCP site). For servers whose site another library creates (wslink's,
+    under trame): :func:`guard_app` sets the guard and its middleware on the application, and
+    :func:`guard_wslink_sites` makes wslink create this site. Checked against aiohttp 3.14:
+    ``TCPSite.start`` passes ``runner._server`` to ``loop.create_server`` as the protocol
+    factory; the guarded factory stands in for it while the site starts."""
+
+    async def start(self) -> None:
+        runner = self._runner
+        app = getattr(runner, "app", None)
+        guard = app.get(GUARD_KEY) if app is not None else None
+        if guard is None:
+            await super().start()
+            return
+        server = runner._server
+        runner._server = guard.factory(server)
+        try:
+            await super().start()
+        finally:
+            runner._server = server
+        guard.sweeper = asyncio.create_task(guard.sweep_forever())
+
+    async def stop(self) -> None:
+        app = getattr(self._runner, "app", None)
+        guard = app.get(GUARD_KEY) if app is not None else None
+        if guard is not None and guard.sweeper is not None:
+            guard.sweeper.cancel()
+        await super().stop()
+
+
+def guard_app(app: web.Application, guard: ConnectionGuard | None = None) -> ConnectionGuard:
+    """Put a ConnectionGuard (and its middleware) on ``app`` (before it starts)."""
+    guard = guard or ConnectionGuard()
+    app[GUARD_KEY] = guard
+    app.middlewares.append(guard.middleware)
+    return guard
+
+
+class _WebWithGuardedSite:
+    """aiohttp.web as wslink's aiohttp backend sees it, with GuardedSite as its TCPSite."""
+
+    def __getattr__(self, name: str) -> Any:
+        return GuardedSite if name == "TCPSite" else getattr(web, name)
+
+
+def guard_wslink_sites() -> None:
+    """Make wslink's aiohttp backend (wslink 2.6: ``WebAppServer.start`` builds
+    ``aiohttp_web.TCPSite``) create GuardedSite; an application without a guard is served as
+    before."""
+    from wslink.backends import aiohttp as backend  # noqa: PLC0415  (the app's server only)
+
+    if not isinstance(backend.aiohttp_web, _WebWithGuardedSite):
+        backend.aiohttp_web = _WebWithGuardedSite()
 
 
 def raise_open_file_limit() -> tuple[int, int]:

@@ -288,7 +288,10 @@ class Launcher:
 
     async def _on_startup(self, _app) -> None:
         self._client = aiohttp.ClientSession(
-            auto_decompress=False, timeout=aiohttp.ClientTimeout(total=None, sock_connect=10)
+            auto_decompress=False,
+            timeout=aiohttp.ClientTimeout(total=None, sock_connect=10),
+            # closed by this side before a session's guard closes an idle one (its 10 s)
+            connector=aiohttp.TCPConnector(keepalive_timeout=connections.IDLE_S / 2),
         )
         self._ensure_spare()
         self._reaper = asyncio.create_task(self._reap_forever())

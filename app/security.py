@@ -37,6 +37,7 @@ from wslink import protocol as wslink_protocol
 from wslink.chunking import HEADER_LENGTH, _decode_header
 from wslink.websocket import LinkProtocol
 
+from app import connections
 from app.logic.upload import MAX_UPLOAD_BYTES
 from app.state import MAX_MATERIAL_ENTRIES, echo
 from app.sync import ClientStateSync
@@ -564,8 +565,10 @@ def install(
         sync.attach(core_protocol)
 
     def bind(web_app) -> None:
+        connections.guard_app(web_app.app)  # idle and partial connections closed
         web_app.app.middlewares.append(door.middleware)
 
+    connections.guard_wslink_sites()
     server.add_protocol_to_configure(configure)
     server.controller.on_server_bind.add(bind)
     server.options["ws_max_msg_size"] = WS_CHUNK_BYTES

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import time
 import urllib.error
 import urllib.request
 
@@ -329,3 +330,33 @@ def test_the_last_write_wins_on_every_page(app):
     assert (final["azimuth_deg"], final["pitch_deg"]) == (11, -5)
     assert c.seen("azimuth_deg")[-1] == 11 and 10 not in c.seen("azimuth_deg")[1:]
     assert a.seen("azimuth_deg") in ([], [11])  # A is never sent its own values
+
+
+# -- 4. connections ----------------------------------------------------------------------------
+def test_half_open_connections_are_evicted_and_a_page_still_loads(app):
+    """Connections that never finish their request line are capped per address (the longest
+    idle closed first, app.connections), so a page load goes through a crowd of them."""
+    import socket
+
+    from app.connections import PER_ADDRESS
+
+    crowd = []
+    try:
+        for _ in range(PER_ADDRESS + 40):
+            s = socket.create_connection(("127.0.0.1", app.port), timeout=30)
+            s.sendall(b"GET /index.html HTTP/1.1\r\nHost: x\r\nX-Slow: ")
+            crowd.append(s)
+        assert http_get(app.url)[0] == 200
+        closed, deadline = 0, time.monotonic() + 30
+        for s in crowd[:60]:  # the oldest: evicted by the newer ones
+            s.settimeout(max(0.01, deadline - time.monotonic()))
+            try:
+                closed += s.recv(1024) == b""
+            except ConnectionResetError:
+                closed += 1
+            except TimeoutError:
+                pass  # still open
+        assert closed >= 40
+    finally:
+        for s in crowd:
+            s.close()

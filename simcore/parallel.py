@@ -1,8 +1,9 @@
 """How many threads one frame may use (the ray cast and the echo features split over them).
 
-Default: 2 (this project's machines have 2 cores; embreex and numpy release the GIL). Where frames
-already run side by side, one per core (a Dask worker per core), set 1 to avoid oversubscription.
-Results never depend on it.
+Default: the cores this process may use (``os.sched_getaffinity``; embreex, numpy and the compiled
+kernel release the GIL), or ``LMAPD_THREADS``; ``lmapd --threads N`` and :func:`set_threads` set it.
+Where frames already run side by side, one per core (a Dask worker per core), they set 1 to avoid
+oversubscription. Results never depend on it (tests/core/test_threads.py).
 
 A frame runs with the BLAS libraries single-threaded (:func:`blas_serial`): OpenBLAS's threads
 spin-wait after each call, holding the cores the frame's own threads need (measured: a 2-thread ray
@@ -22,7 +23,39 @@ import threadpoolctl
 T = TypeVar("T")
 R = TypeVar("R")
 
-_threads = max(1, min(2, os.cpu_count() or 1))
+THREADS_ENV = "LMAPD_THREADS"
+
+
+def available_cores() -> int:
+    """The CPUs this process may run on (its affinity mask; all of them where there is none)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # no affinity on this platform
+        return max(1, os.cpu_count() or 1)
+
+
+def default_threads() -> int:
+    """Threads per frame unless set: ``LMAPD_THREADS`` if it is a whole number >= 1 (otherwise a
+    warning names it and the cores are used), else :func:`available_cores`."""
+    text = os.environ.get(THREADS_ENV, "").strip()
+    if text:
+        try:
+            n = int(text)
+        except ValueError:
+            n = 0
+        if n >= 1:
+            return n
+        import warnings  # noqa: PLC0415  (only for a bad setting)
+
+        warnings.warn(
+            f"{THREADS_ENV}={text!r} is not a whole number >= 1: using the "
+            f"{available_cores()} cores this process may use",
+            stacklevel=2,
+        )
+    return available_cores()
+
+
+_threads = default_threads()
 
 
 def set_threads(n: int) -> None:

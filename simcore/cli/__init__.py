@@ -74,7 +74,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", required=True)
     for module in SUBCOMMANDS:
-        module.add_parser(sub)
+        command = module.add_parser(sub)
+        command.add_argument(
+            "--threads",
+            type=int,
+            metavar="N",
+            help="threads per frame (default: the cores this process may use, or "
+            "$LMAPD_THREADS); results do not depend on it",
+        )
     return parser
 
 
@@ -111,12 +118,25 @@ def _user_errors() -> tuple[type[BaseException], ...]:
     return (CliError, SceneError, TargetError, FileNotFoundError)
 
 
+def _set_threads(n: int | None) -> None:
+    """``--threads N``: threads per frame for this command."""
+    if n is None:
+        return
+    if n < 1:
+        raise CliError(f"--threads {n}: give a whole number >= 1")
+    from ..parallel import THREADS_ENV, set_threads  # noqa: PLC0415  (only when asked for)
+
+    set_threads(n)
+    os.environ[THREADS_ENV] = str(n)  # and the processes it starts (the app's sessions)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run ``lmapd`` with ``argv`` (default ``sys.argv[1:]``); the exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
         merge_scene_option(args)
+        _set_threads(getattr(args, "threads", None))
         return args.func(args)
     except KeyboardInterrupt:
         say("lmapd: interrupted", error=True)

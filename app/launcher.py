@@ -64,7 +64,7 @@ MIB = 2**20
 # (354-370 MB, median 357 MB, with its preview's stages, scripts/bench_sessions.py, 2026-11-25);
 # the default session cap is derived from it.
 SESSION_RSS_BYTES = 370 * MIB
-MAX_DEFAULT_SESSIONS = 8
+MAX_DEFAULT_SESSIONS = 30  # a class
 MEMORY_SHARE = 0.75  # of the memory available at start, for the children together
 FRAME_BYTES = security.WS_CHUNK_BYTES + 4096  # one websocket frame: a wslink chunk and its header
 CLIENT_ID = re.compile(r"^[A-Za-z0-9_-]{16,64}$")

@@ -227,7 +227,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--max-sessions",
         type=int,
         default=None,
-        help="sessions open at once (default: as many as fit in the memory cap, at most 8)",
+        help="sessions open at once (default: as many as fit in the memory cap, at most 30, a "
+        "class)",
     )
     parser.add_argument(
         "--memory-cap-mb",
@@ -360,9 +361,24 @@ def run_launcher(args: argparse.Namespace) -> int:
             f"{caps.input_idle_s / 60:g} min (--shared: one scene for every tab)",
             flush=True,
         )
+        print(class_line(caps), flush=True)
 
     return serve_until_stopped(
         lambda: asyncio.run(launcher.serve(door, args.host, args.port, announce)), args
+    )
+
+
+def class_line(caps) -> str:
+    """What the session cap means for a class of 30."""
+    from app import launcher  # noqa: PLC0415  (launcher mode only)
+
+    need_gb = launcher.MAX_DEFAULT_SESSIONS * caps.session_bytes / 1e9
+    if caps.max_sessions >= launcher.MAX_DEFAULT_SESSIONS:
+        return f"lmapd-sim app: room for a class of {launcher.MAX_DEFAULT_SESSIONS} tabs"
+    return (
+        f"lmapd-sim app: room for {caps.max_sessions} tabs, not a class of "
+        f"{launcher.MAX_DEFAULT_SESSIONS} (that needs about {need_gb:.0f} GB for the sessions: "
+        "--memory-cap-mb and --max-sessions set it)"
     )
 
 

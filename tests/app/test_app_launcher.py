@@ -146,6 +146,18 @@ def test_the_default_caps_fit_the_sessions_in_the_memory_share_between_one_and_e
     assert (given.max_sessions, given.memory_cap_bytes, given.idle_s) == (3, 5, 2)
 
 
+def test_the_start_says_whether_a_class_of_30_fits():
+    from app.main import class_line
+
+    mib = lau.MIB
+    small = lau.default_caps(available_bytes=4000 * mib, session_rss_bytes=370 * mib)
+    assert small.max_sessions == 8
+    line = class_line(small)
+    assert "room for 8 tabs, not a class of 30" in line and "about 12 GB" in line
+    big = lau.default_caps(available_bytes=64000 * mib, session_rss_bytes=370 * mib)
+    assert big.max_sessions == 30 and "room for a class of 30" in class_line(big)
+
+
 @pytest.mark.parametrize(
     ("rest", "ok"),
     [

@@ -30,6 +30,7 @@ from app.logic.lessons import LessonGuide
 from app.logic.links import LINK_NAMES, controls_from_link, link_query
 from app.logic.pacing import FramePacer
 from app.logic.parts import PartHighlight
+from app.logic.physics_page import PhysicsPage
 from app.logic.scene_map import resolved_materials, scene_from_controls
 from app.logic.selection import PixelSelection
 from app.logic.studies import DesignStudies
@@ -129,6 +130,9 @@ class AppLogic:
         server.trigger("export_scene")(self.export_scene)
         server.trigger("open_lesson")(self.open_lesson)
         server.trigger("leave_lesson")(self.lessons.leave)
+        self.physics = PhysicsPage(self.state)  # a card's "Read more" (its own state)
+        server.trigger("open_physics")(self.physics.open)
+        server.trigger("close_physics")(self.physics.close)
         server.controller.on_server_exited.add(lambda **_: self.runner.close())
 
     @property

@@ -382,6 +382,7 @@ def build_layout(server) -> VAppLayout:
         client.Style(classroom.CURSOR_CSS)
         client.Style(glossary.CSS)
         glossary.glossary_dialog()
+        lessons.physics_dialog()
         client.ClientStateChange(value="frame_key", change=FRAME_SHOWN, trigger_on_create=True)
         app_bar()
         with v3.VNavigationDrawer(

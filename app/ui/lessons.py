@@ -18,6 +18,10 @@ CSS = """
 .lesson-card .lesson-text { font-size: 0.88rem; line-height: 1.45; margin-bottom: 4px; }
 .lesson-card .lesson-label { font-weight: 600; color: #0d47a1; }
 .lesson-card code { font-size: 0.8rem; }
+.physics-text { font-size: 0.9rem; line-height: 1.5; }
+.physics-text table { border-collapse: collapse; margin: 6px 0; }
+.physics-text td, .physics-text th { border: 1px solid #e0e0e0; padding: 2px 6px; }
+.physics-text code { font-size: 0.8rem; }
 """
 
 
@@ -74,7 +78,15 @@ def lesson_card() -> None:
                     html.Span(f"{{{{ lesson.{key} }}}}")
             with html.P(classes="lesson-text lesson-reference text-caption mb-0"):
                 html.Span("Read more: ", classes="lesson-label")
-                html.Span("{{ lesson.reference_title }}, ")
+                html.A(  # the physics page's section, in a dialog
+                    "{{ lesson.reference_title }}",
+                    v_if="physics_available",
+                    href=("'#' + lesson.reference.split('#')[1]",),
+                    click="$event.preventDefault(); trigger('open_physics', [lesson.reference])",
+                    classes="physics-link",
+                )
+                html.Span("{{ lesson.reference_title }}", v_else=True)
+                html.Span(", ")
                 html.Code("{{ lesson.reference }}")
                 html.Span(" in the project's docs.")
             html.P(
@@ -82,3 +94,34 @@ def lesson_card() -> None:
                 v_if="lesson.note",
                 classes="lesson-text lesson-note text-deep-orange-darken-2 mb-0 mt-1",
             )
+
+
+def physics_dialog() -> None:
+    """The physics page's section a card's link opened (app.logic.physics_page)."""
+    with v3.VDialog(
+        model_value=("!!physics_section",),
+        update_modelValue="$event || trigger('close_physics')",
+        max_width=820,
+        scrollable=True,
+    ):
+        with v3.VCard(
+            v_if="physics_section",
+            classes="physics-card",
+            **html_attributes(role="region", aria_label="Physics page"),
+        ):
+            with v3.VCardTitle(classes="card-title d-flex align-center ga-2"):
+                v3.VIcon("mdi-book-open-variant", color="primary", size="small")
+                html.Span("{{ physics_section.title }}", classes="physics-title")
+                v3.VSpacer()
+                v3.VBtn(
+                    icon="mdi-close",
+                    size="small",
+                    variant="text",
+                    click="trigger('close_physics')",
+                    **html_attributes(aria_label="Close the physics page"),
+                )
+            html.Div(
+                "docs/physics.md#{{ physics_section.anchor }}",
+                classes="text-caption hint px-4",
+            )
+            v3.VCardText(v_html=("physics_section.html",), classes="physics-text")

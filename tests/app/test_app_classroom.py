@@ -48,3 +48,21 @@ def test_a_likely_echo_missed_is_said_to_be_missed_by_chance(app):
         row, col = divmod(int(result.echo.pixel[np.flatnonzero(weak)[0]]), result.pixels)
         app.logic.on_pixel_click(row, col)
         assert "too weak for the threshold" in app.state.waveforms["data"][0]["name"]
+
+
+def test_every_lessons_reference_opens_its_section_of_the_physics_page(app):
+    from app.logic.lessons import LESSONS
+
+    assert app.state.physics_available
+    for lesson in LESSONS:
+        app.logic.physics.open(lesson.reference)
+        section = app.state.physics_section
+        assert section["anchor"] == lesson.reference.split("#")[1]
+        assert section["title"] and len(section["html"]) > 200
+    app.logic.physics.close()
+    assert app.state.physics_section is None
+    for bad in ("docs/physics.md#no-such-section", "../../etc/passwd", 7, None):
+        app.state.input_message = ""
+        app.logic.physics.open(bad)
+        assert app.state.physics_section is None
+        assert app.state.input_message == "Physics page: no such section"

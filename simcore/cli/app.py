@@ -1,8 +1,9 @@
 """``lmapd app``: serve the browser app (the ``app`` package, installed with ``.[app]``).
 
 lmapd app [--host 127.0.0.1] [--port 8080] [--scene SCENE] [--shared]
-          [--max-sessions N] [--memory-cap-mb MB] [--idle-s S] [--no-spare] [--no-preview]
-          [--studies DIR]
+          [--max-sessions N] [--memory-cap-mb MB] [--idle-s S] [--input-idle-min MIN]
+          [--max-age-h H] [--frame-memory-mb MB] [--public-url URL ...] [--no-spare]
+          [--no-preview] [--studies DIR]
 """
 
 from __future__ import annotations
@@ -27,6 +28,23 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     app.add_argument("--max-sessions", type=int, help="sessions at once (default: from memory)")
     app.add_argument("--memory-cap-mb", type=float, help="the sessions' memory cap [MB]")
     app.add_argument("--idle-s", type=float, help="a closed page's session ends after this [s]")
+    app.add_argument(
+        "--input-idle-min",
+        type=float,
+        help="a session whose page sends nothing this long ends, open or not [min] (default 30)",
+    )
+    app.add_argument("--max-age-h", type=float, help="a session ends this old [h] (default 8)")
+    app.add_argument(
+        "--frame-memory-mb",
+        type=float,
+        help="a frame estimated to need more memory is refused [MB] (default 1536)",
+    )
+    app.add_argument(
+        "--public-url",
+        action="append",
+        metavar="URL",
+        help="the address a reverse proxy serves the app at (https://NAME); repeatable",
+    )
     app.add_argument("--no-spare", action="store_true", help="start no process ahead")
     app.add_argument(
         "--no-preview", action="store_true", help="always wait for the preset's frame (no preview)"
@@ -59,7 +77,10 @@ def run_cli(args: argparse.Namespace) -> int:
         if not Path(args.studies).is_dir():
             raise CliError(f"--studies {args.studies!r} is not a folder")
         argv += ["--studies", args.studies]
-    for option in ("max_sessions", "memory_cap_mb", "idle_s"):
+    for url in args.public_url or []:
+        argv += ["--public-url", url]
+    options = ("max_sessions", "memory_cap_mb", "idle_s", "input_idle_min", "max_age_h")
+    for option in (*options, "frame_memory_mb"):
         value = getattr(args, option, None)
         if value is not None:
             argv += ["--" + option.replace("_", "-"), str(value)]

@@ -633,3 +633,17 @@ def test_a_malformed_request_logs_one_short_line_without_the_token(tmp_path):
     malformed = [line for line in lines if "malformed" in line]
     assert len(malformed) == len(requests), lines
     assert any("without the token" in line for line in lines) and len(lines) <= len(requests) + 1
+
+
+def test_lmapd_app_passes_the_session_and_proxy_options_on(monkeypatch):
+    import app.main as app_main
+    from simcore import cli
+
+    seen = []
+    monkeypatch.setattr(app_main, "main", lambda argv: seen.append(argv) or 0)
+    argv = ["app", "--input-idle-min", "5", "--max-age-h", "2", "--frame-memory-mb", "800"]
+    argv += ["--public-url", "https://a.example", "--public-url", "https://b.example:8443"]
+    assert cli.main(argv) == 0
+    given = app_main.parse_args(seen[0])
+    assert (given.input_idle_min, given.max_age_h, given.frame_memory_mb) == (5, 2, 800)
+    assert given.public_url == ["https://a.example", "https://b.example:8443"]

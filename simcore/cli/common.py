@@ -151,6 +151,30 @@ def staged_outputs(outputs: dict[str, Path | None]) -> Iterator[dict[str, Path]]
                 tmp.unlink()
 
 
+def add_cluster_options(parser: argparse.ArgumentParser, what: str) -> None:
+    """``--scheduler ADDRESS`` and ``--workers N``: where a command's frames run (``what``)."""
+    parser.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help=f"a running Dask scheduler for the {what}, tcp://HOST:8786 (default: a local cluster)",
+    )
+    parser.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help="worker processes of the local cluster (default: the number of cores); "
+        f"0 runs the {what} in this process without Dask",
+    )
+
+
+def check_cluster_options(args: argparse.Namespace) -> None:
+    """One message for a --scheduler with --workers, or fewer than 0 workers."""
+    if args.scheduler and args.workers is not None:
+        raise CliError("--workers sizes the local cluster; with --scheduler give no --workers")
+    if args.workers is not None and args.workers < 0:
+        raise CliError(f"--workers {args.workers}: give a number >= 0")
+
+
 def one_line(text: str) -> str:
     """An error message as one line: control characters escaped, each run of more than
     ``tomlfile.MAX_QUOTE_CHARS`` characters without a space clipped, the whole at most about

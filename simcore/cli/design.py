@@ -10,7 +10,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from .common import CliError, say
+from .common import CliError, add_cluster_options, check_cluster_options, say
 
 EXIT_INTERRUPTED = 130  # Ctrl+C: the finished designs are kept; --resume goes on
 
@@ -30,16 +30,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument(
         "--trials", type=int, metavar="N", help="designs to screen (default: the study's)"
     )
-    p.add_argument(
-        "--workers",
-        type=int,
-        metavar="N",
-        help="worker processes of a local Dask cluster (default: the number of cores); "
-        "0 runs in this process without Dask",
-    )
-    p.add_argument(
-        "--scheduler", metavar="ADDRESS", help="a running Dask scheduler, tcp://HOST:8786"
-    )
+    add_cluster_options(p, "designs")
     p.add_argument("--resume", action="store_true", help="go on with the designs already in DIR")
     p.set_defaults(func=run_cli)
     return p
@@ -49,10 +40,7 @@ def run_cli(args: argparse.Namespace) -> int:
     """``lmapd design``: 0 when a design meets every requirement, 1 when none does."""
     from .. import design, io  # noqa: PLC0415  (the imaging chain, optuna, Dask)
 
-    if args.scheduler and args.workers is not None:
-        raise CliError("--workers sizes the local cluster; with --scheduler give no --workers")
-    if args.workers is not None and args.workers < 0:
-        raise CliError(f"--workers {args.workers}: give a number >= 0")
+    check_cluster_options(args)
     if args.trials is not None and args.trials < 1:
         raise CliError(f"--trials {args.trials}: give a number >= 1")
     out = Path(args.out)

@@ -10,7 +10,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from .common import CliError, say
+from .common import CliError, add_cluster_options, check_cluster_options, say
 
 CLOUD_FORMATS = ("ply", "las")  # = simcore.sweep.spec.CLOUD_FORMATS (a test checks; --help text)
 
@@ -26,18 +26,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     )
     p.add_argument("sweep", help="sweep file (TOML: base, [set], [grid], [[list]])")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
-    p.add_argument(
-        "--scheduler",
-        metavar="ADDRESS",
-        help="a running Dask scheduler, tcp://HOST:8786 (default: a local cluster)",
-    )
-    p.add_argument(
-        "--workers",
-        type=int,
-        metavar="N",
-        help="worker processes of the local cluster (default: the number of cores); "
-        "0 runs the frames in this process without Dask",
-    )
+    add_cluster_options(p, "frames")
     p.add_argument(
         "--clouds",
         choices=(*CLOUD_FORMATS, "none"),
@@ -51,10 +40,7 @@ def run_cli(args: argparse.Namespace) -> int:
     """``lmapd sweep``: 0 if every frame is done, 1 if some failed (they are retried next run)."""
     from ..sweep import load_sweep, run_sweep  # noqa: PLC0415  (the imaging chain)
 
-    if args.scheduler and args.workers is not None:
-        raise CliError("--workers sizes the local cluster; with --scheduler give no --workers")
-    if args.workers is not None and args.workers < 0:
-        raise CliError(f"--workers {args.workers}: give a number >= 0")
+    check_cluster_options(args)
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise CliError(f"--out {args.out!r} is a file, not a folder")

@@ -230,25 +230,31 @@ class RayCaster:
         face : (n,) int32 -- hit face index, -1 for a miss
         """
         n = len(directions_t)
-        starts = (origins_t[None, :] + start_m * directions_t).astype(np.float32)
-        dirs32 = directions_t.astype(np.float32)
+        directions_t = np.asarray(directions_t, dtype=np.float64)
+        origins_t = np.asarray(origins_t, dtype=np.float64)
         # a few chunks per thread: rays near fine detail cost several times more than others,
         # and equal halves of an image are rarely equal work
         parts = parallel.threads() * (4 if n > 16384 else 1) if n > 4096 else 1
         bounds = np.linspace(0, n, parts + 1).astype(int)
         chunks = [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+        range_m = np.empty(n)
+        face = np.empty(n, dtype=np.int32)
 
         def run(part):
+            """One chunk, its float32 rays made and its hits written by the thread that casts
+            it: the conversions scale with the threads as the traversal does."""
             if part.stop == part.start:
-                return {"tfar": np.zeros(0, np.float32), "primID": np.zeros(0, np.int32)}
-            return self._scene.run(starts[part], dirs32[part], output=1)
+                return
+            d = directions_t[part]
+            starts = (origins_t[None, :] + start_m * d).astype(np.float32)
+            hits = self._scene.run(starts, d.astype(np.float32), output=1)
+            primitive = np.asarray(hits["primID"])
+            face[part] = primitive
+            range_m[part] = np.where(
+                primitive >= 0, start_m + hits["tfar"].astype(np.float64), np.inf
+            )
 
-        results = parallel.map_threads(run, chunks)
-        face = np.concatenate([r["primID"] for r in results]).astype(np.int32)
-        tfar = np.concatenate([r["tfar"] for r in results]).astype(np.float64)
-        hit = face >= 0
-        range_m = np.full(n, np.inf)
-        range_m[hit] = start_m + tfar[hit]
+        parallel.map_threads(run, chunks)
         return range_m, face
 
     def occluded(self, origins_t, direction_t) -> np.ndarray:

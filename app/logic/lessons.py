@@ -33,6 +33,14 @@ from app.state import MAX_SELECTED_PIXELS, Controls, echo
 MJ = 1e-3  # J per mJ: a pulse energy written as ``0.1 * MJ`` shows as 0.1 mJ on the slider
 NM = 1e-9  # m per nm: a filter width written as ``100 * NM`` shows as 100 nm
 LESSON_TARGET = "Mars Reconnaissance Orbiter"  # the target whose figures the cards give
+# the views a card can point at: its name on the card, and the page's element (app.ui)
+VIEWS: dict[str, tuple[str, str]] = {
+    "waveform": ("the waveform chart", ".waveform-card"),
+    "array": ("the detector array image", ".array-card"),
+    "cloud": ("the point cloud", ".cloud-card"),
+    "scene": ("the 3D scene", ".scene-card"),
+    "stats": ("the statistics", ".stats-card"),
+}
 
 # The paper scene's controls as link settings (its pose, array, pulse, threshold, seed, fidelity,
 # no Sun, the linear-mode receiver): every lesson starts from these, so the same lesson gives the
@@ -69,6 +77,7 @@ class Lesson:
     figures : the card's numbers, each computed again by the tests
     color_by, image_kind : the display choices (``app.state.COLOR_BY``, ``IMAGE_KINDS``)
     mode, fly_t_s, fly_j2 : single frame, or the fly-around frame at ``fly_t_s`` [s]
+    view : the view its card is about (a key of ``VIEWS``): the page brings it into sight
     """
 
     key: str
@@ -86,6 +95,7 @@ class Lesson:
     mode: str = "single"
     fly_t_s: float = 0.0
     fly_j2: bool = False
+    view: str = "waveform"
 
     @property
     def link_settings(self) -> dict[str, Any]:
@@ -104,6 +114,8 @@ class Lesson:
             "reference": self.reference,
             "reference_title": self.reference_title,
             "note": "",
+            "view": VIEWS[self.view][0],
+            "view_selector": VIEWS[self.view][1],
         }
 
 
@@ -151,6 +163,7 @@ LESSONS: tuple[Lesson, ...] = (
     ),
     Lesson(
         key="panels-azimuth",
+        view="array",
         title="Solar panels fade as the azimuth grows",
         settings={"azimuth_deg": 3.0, "pulse_energy_j": 0.1 * MJ},
         selection=((163, 49), (172, 200)),
@@ -201,6 +214,7 @@ LESSONS: tuple[Lesson, ...] = (
     ),
     Lesson(
         key="distance",
+        view="stats",
         title="Points lost with distance (and why not as R⁻² everywhere)",
         settings={"distance_m": 3000.0},
         selection=((137, 111), (134, 125), (114, 125)),
@@ -254,6 +268,7 @@ LESSONS: tuple[Lesson, ...] = (
     ),
     Lesson(
         key="tnr-trade",
+        view="cloud",
         title="The TNR trade: dropped pixels against false alarms",
         settings={"pulse_energy_j": 0.05 * MJ, "tnr": 4.0},
         selection=((124, 141),),
@@ -305,6 +320,7 @@ LESSONS: tuple[Lesson, ...] = (
     ),
     Lesson(
         key="pixel-count",
+        view="cloud",
         title="Pixel count against detail",
         settings={"pixels": 64},
         selection=((28, 32), (28, 33)),
@@ -350,6 +366,7 @@ LESSONS: tuple[Lesson, ...] = (
     ),
     Lesson(
         key="flyaround-edge-on",
+        view="array",
         title="Fly-around: the solar panels edge-on",
         settings={},
         selection=((101, 13), (102, 26)),
@@ -396,6 +413,7 @@ LESSONS: tuple[Lesson, ...] = (
     ),
     Lesson(
         key="day-night",
+        view="array",
         title="Day against night: sunlight through the filter",
         settings={
             "sun.mode": "manual",
@@ -542,6 +560,8 @@ class LessonGuide:
         self.state = state
         self.open_key: str | None = None
         self.state.lesson = None
+        self.state.lesson_folded = False  # the card folded to one line (the page decides)
+        self.state.client_only("lesson_folded")
 
     def plan(self, key: Any, initial: Controls) -> LessonPlan | None:
         """What lesson ``key`` sets, or None with a message on the page if there is no such

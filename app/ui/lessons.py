@@ -14,7 +14,17 @@ CSS = """
 .lesson-button.v-btn { height: auto !important; min-height: 30px; padding: 4px 10px;
   justify-content: flex-start; text-align: left; text-transform: none; letter-spacing: 0; }
 .lesson-button .v-btn__content { white-space: normal; line-height: 1.3; }
-.lesson-card { border-left: 4px solid #1565c0; }
+.lesson-card { border-left: 4px solid #1565c0; position: sticky; top: 56px; z-index: 5;
+  max-height: 45vh; overflow-y: auto; }
+.lesson-head { flex-wrap: nowrap; overflow: hidden; }
+.lesson-head .lesson-title, .lesson-head .lesson-view-name { white-space: nowrap;
+  overflow: hidden; text-overflow: ellipsis; min-width: 0; }
+.lesson-head .lesson-title { flex: 0 1 auto; }
+.lesson-head .lesson-view-name { flex: 0 100 auto; }
+.lesson-view { outline: 3px solid #ffb300; outline-offset: 2px; transition: outline-color 0.5s; }
+@media (max-width: 600px) { .lesson-card { top: 48px; }
+  .lesson-head { flex-wrap: wrap; }
+  .lesson-head .lesson-title { white-space: normal; flex: 1 1 100%; } }
 .lesson-card .lesson-text { font-size: 0.88rem; line-height: 1.45; margin-bottom: 4px; }
 .lesson-card .lesson-label { font-weight: 600; color: #0d47a1; }
 .lesson-card code { font-size: 0.8rem; }
@@ -51,18 +61,76 @@ def lessons_panel() -> None:
                     )
 
 
+# A lesson opened (the ``lesson`` state changed to a card): on a phone or a narrow window the
+# drawer closes; on a short screen (under 1000 px) the card folds to one line (its title, the
+# view it is about and a button to unfold it); the card stays at the top of the window while the
+# page scrolls, and the view it names is brought into sight just below it, outlined for a few
+# seconds (again when the lesson's frame arrives: a chart may grow meanwhile).
+LESSON_SCRIPT = """
+window.trame.utils.lmapdLesson = {
+  pending: null,
+  opened(lesson) {
+    const state = window.trame.state;
+    if (!lesson) { this.pending = null; return; }
+    if (window.innerWidth < 960) state.set('main_drawer', false);
+    state.set('lesson_folded', window.innerHeight < 1000);
+    this.pending = { selector: lesson.view_selector, until: performance.now() + 30000 };
+    setTimeout(() => this.show(), 350);  // after the drawer's and the card's transitions
+  },
+  frame() {
+    if (this.pending && performance.now() < this.pending.until) setTimeout(() => this.show(), 50);
+  },
+  show() {
+    if (!this.pending) return;
+    const view = document.querySelector(this.pending.selector);
+    const card = document.querySelector('.lesson-card');
+    if (!view) return;
+    const bar = document.querySelector('.v-app-bar');
+    const above = (bar ? bar.getBoundingClientRect().bottom : 0)
+      + (card ? card.getBoundingClientRect().height : 0) + 8;
+    const top = view.getBoundingClientRect().top + window.scrollY - above;
+    window.scrollTo({ top: Math.max(0, top), behavior: 'instant' });
+    view.classList.add('lesson-view');
+    clearTimeout(this.timer);
+    this.timer = setTimeout(() => view.classList.remove('lesson-view'), 4000);
+  },
+};
+"""
+
+
 def lesson_card() -> None:
-    """The open lesson's card, above the views (nothing when no lesson is open)."""
+    """The open lesson's card, above the views (nothing when no lesson is open): folded, one
+    line; unfolded, what to look at, why, what to try and where to read more."""
+    client.Script(LESSON_SCRIPT)
+    client.ClientStateChange(
+        value="lesson", change="trame.utils.lmapdLesson && trame.utils.lmapdLesson.opened($event)"
+    )
+    client.ClientStateChange(
+        value="frame_key", change="trame.utils.lmapdLesson && trame.utils.lmapdLesson.frame()"
+    )
     with v3.VCard(
         v_if="lesson",
-        classes="lesson-card mb-2",
-        elevation=1,
+        classes=("['lesson-card mb-2', lesson_folded ? 'lesson-folded' : '']",),
+        elevation=2,
         **html_attributes(role="region", aria_label="Lesson"),
     ):
-        with v3.VCardTitle(classes="card-title d-flex align-center flex-wrap ga-2"):
+        with v3.VCardTitle(classes="card-title d-flex align-center ga-2 lesson-head"):
             v3.VIcon("mdi-school-outline", color="primary", size="small")
             html.Span("Lesson: {{ lesson.title }}", classes="lesson-title")
+            html.Span(
+                "· look at {{ lesson.view }}",
+                classes="lesson-view-name text-body-2 text-medium-emphasis",
+            )
             v3.VSpacer()
+            v3.VBtn(
+                "{{ lesson_folded ? 'Show the card' : 'Fold' }}",
+                prepend_icon=("lesson_folded ? 'mdi-chevron-down' : 'mdi-chevron-up'",),
+                size="small",
+                variant="text",
+                click="lesson_folded = !lesson_folded",
+                classes="fold-lesson",
+                **html_attributes(aria_expanded=("String(!lesson_folded)",)),
+            )
             v3.VBtn(
                 "Leave lesson",
                 prepend_icon="mdi-close",
@@ -71,7 +139,7 @@ def lesson_card() -> None:
                 click="trigger('leave_lesson')",
                 classes="leave-lesson",
             )
-        with v3.VCardText(classes="pt-1 pb-2"):
+        with v3.VCardText(v_show="!lesson_folded", classes="pt-1 pb-2 lesson-body"):
             for label, key in (("Look", "look"), ("Why", "why"), ("Try", "try_next")):
                 with html.P(classes=f"lesson-text lesson-{key.replace('_', '-')}"):
                     html.Span(f"{label}: ", classes="lesson-label")

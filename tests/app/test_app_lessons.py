@@ -403,7 +403,7 @@ def figures_lm_vs_gm(app, pipeline, result) -> dict:
     (row, col), n = lesson.selection[0], result.pixels
     assert result.waveform(row, col).detected and pixel_parts(result)[row * n + col] == {"solar_L"}
     names = [trace["name"] for trace in app.state.waveforms["data"]]
-    assert any(n.startswith(f"({row}, {col}) counts") for n in names)  # photon histogram
+    assert any(n.startswith(f"({row}, {col}) measured counts") for n in names)  # photon histogram
 
     def range_error_m(r: simcore.Result) -> float:
         d = r.detection

@@ -77,6 +77,9 @@ KEYBOARD_SCRIPT = """
 """
 
 CURSOR_CSS = """
+.peak-marker { position: absolute; width: 9px; height: 9px; border: 2px solid #ff40c8;
+  border-radius: 50%; transform: translate(-50%, -50%); pointer-events: none;
+  box-shadow: 0 0 0 1px rgba(0,0,0,0.6); }
 .array-cursor { position: absolute; transform: translate(-50%, -50%); pointer-events: none;
   outline: 2px dashed #ffb300; outline-offset: 1px; min-width: 10px; min-height: 10px; }
 """

@@ -89,6 +89,17 @@ ZOOM_STYLE = (
     "left: (-100 * array_zoom.s * array_zoom.x) + '%', "
     "top: (-100 * array_zoom.s * array_zoom.y) + '%' }",
 )
+PEAK_STYLE = (
+    "{ left: ((p[1] + 0.5) / array_image.pixels * 100) + '%', "
+    "top: ((p[0] + 0.5) / array_image.pixels * 100) + '%' }"
+)
+# what the dark pixels of each image mean (a pixel whose echo was not detected still has a peak
+# power, so it is coloured in that image)
+DARK_MEANS = (
+    "({ range: 'dark: no point', peak_power: 'dark: no echo; echoes not detected are coloured "
+    "too', background: 'dark: no background light', multi_peak: 'dark: no echo; rings mark the "
+    "pixels with two or more peaks' })[image_kind] || ''"
+)
 MARKER_STYLE = (
     "{ left: ((p[1] + 0.5) / array_image.pixels * 100) + '%', "
     "top: ((p[0] + 0.5) / array_image.pixels * 100) + '%', "
@@ -172,6 +183,12 @@ def array_card() -> None:
                     mousemove=PIXEL_HOVER,
                     mouseleave=HOVER_END,
                 )
+                html.Div(  # rings on the multi-peak pixels: visible at any zoom (at most 300)
+                    v_for="(p, i) in (array_image.multi_peak || []).slice(0, 300)",
+                    key="'m' + i",
+                    classes="peak-marker",
+                    style=(PEAK_STYLE,),
+                )
                 html.Div(
                     v_if="array_cursor && array_cursor[0] < array_image.pixels",
                     classes="array-cursor",
@@ -191,7 +208,7 @@ def array_card() -> None:
         )
         with html.Div(v_if="array_image.colorbar", classes="colorbar px-4 pb-2"):
             html.Div(
-                "{{ array_image.colorbar.title }} (dark: no echo / not detected)",
+                f"{{{{ array_image.colorbar.title }}}} ({{{{ {DARK_MEANS} }}}})",
                 classes="colorbar-title",
             )
             html.Div(

@@ -328,7 +328,7 @@ class MeshGeometry:
         return self.part_meshes or ("",) * len(self.part_names)
 
 
-CACHE_FORMAT = 2  # bump when MeshGeometry or the way it is read from a file changes
+CACHE_FORMAT = 3  # bump when MeshGeometry or the way it is read from a file changes
 CACHE_MAX_ENTRIES = 32  # the least recently written entries beyond this are removed
 
 
@@ -500,6 +500,8 @@ def load_mesh_file(
             check_gltf_file(data, kind == "glb", folder)
         except GltfError as exc:
             raise TargetError(f"cannot read the .{kind} file ({exc})") from None
+    if kind == "obj":  # each named object (o) and group (g) of an OBJ becomes a part
+        load_options = {"split_objects": True, "split_groups": True, **load_options}
     loaded = trimesh.load(file_obj, file_type=file_type, force=None, process=False, **load_options)
     geometries = loaded.geometry.values() if isinstance(loaded, trimesh.Scene) else [loaded]
     meshes = [g for g in geometries if isinstance(g, trimesh.Trimesh)]

@@ -221,6 +221,15 @@ def load_builtin(base: simcore.Scene, name: str) -> LoadedTarget:
     return LoadedTarget(scene, engine, None, len(engine.model.mesh.faces))
 
 
+UPLOAD_CHOICE = "upload:"  # the drop-down's value of the uploaded mesh shown (its item's prefix)
+
+
+def upload_item(name: str) -> dict:
+    """The drop-down's item of the uploaded mesh shown (``name``: as messages quote it)."""
+    title = name.strip("'") if name != "the file" else "your mesh"
+    return {"title": f"{title} (uploaded)", "value": UPLOAD_CHOICE + title}
+
+
 def catalogue_items() -> list[dict]:
     """The drop-down's built-in targets: name, size and a thumbnail where the target has one."""
     items = []
@@ -344,7 +353,9 @@ class TargetUploads:
         if target_choice is None or (
             target_choice == self.current.scene.target.mesh and self.current.path is None
         ):
-            return  # an upload is shown (no choice), or the choice is the target shown
+            return  # no choice, or the choice is the target shown
+        if isinstance(target_choice, str) and target_choice.startswith(UPLOAD_CHOICE):
+            return  # the uploaded mesh: shown already (its item exists only while it is)
         if target_choice == self.builtin.scene.target.mesh:
             self.use_builtin()
             return
@@ -405,19 +416,24 @@ class TargetUploads:
         self.current = target
         model = target.engine.model
         materials = resolved_materials(model, target.scene)
+        items = catalogue_items()
+        if target.path is not None:  # the drop-down names the uploaded mesh while it is shown
+            item = upload_item(self._file_name)
+            items.append(item)
         with self.state:
             self.state.update(
                 {
                     "upload_message": message,
                     "target_is_upload": target.path is not None,
-                    "target_choice": None if target.path else target.scene.target.mesh,
+                    "target_items": items,
+                    "target_choice": item["value"] if target.path else target.scene.target.mesh,
                 }
             )
         self.use_target(
             target.scene,
             target.engine,
             dataclasses.replace(self.builtin_initial, materials=materials),
-            model.name if target.path is None else "uploaded mesh",
+            model.name if target.path is None else item["title"],
         )
         if old.path is not None and old.path != target.path:
             old.path.unlink(missing_ok=True)

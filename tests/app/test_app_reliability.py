@@ -228,7 +228,7 @@ def test_an_uploaded_mesh_becomes_the_target_from_a_private_copy(app):
         _watching.clear()
     s = app.state
     assert s.upload_error == "" and s.upload_message.startswith("Loaded 'box.STL': 12 triangles")
-    assert s.target_is_upload and s.target_name == "uploaded mesh"
+    assert s.target_is_upload and s.target_name == "box.STL (uploaded)"  # the base name only
     folder = app.uploads.files.path
     assert stat.S_IMODE(folder.stat().st_mode) == 0o700
     source = Path(app.logic.last_frame.result.target.source)

@@ -10,7 +10,8 @@ import pytest
 import trimesh
 from support.app_helpers import settle, small_app
 
-from simcore.target import builtin_targets
+from simcore.scene import Target
+from simcore.target import builtin_targets, load_target
 
 
 @pytest.fixture(scope="module")
@@ -86,7 +87,52 @@ def test_an_uploads_messages_name_its_file_and_the_input_is_emptied_for_a_new_pi
         app.state.upload_file = {"name": "box.stl", "size": len(data), "content": data}
     settle(app)
     assert app.state.upload_message.startswith("Loaded 'box.stl': 12 triangles")
-    assert app.state.target_choice is None  # an upload: no built-in target chosen
+    # an upload: the drop-down names it (an item of its own, while it is shown)
+    assert app.state.target_choice == "upload:box.stl"
+    assert {"title": "box.stl (uploaded)", "value": "upload:box.stl"} in app.state.target_items
+    assert app.state.target_name == "box.stl (uploaded)"
     app.uploads.use_builtin()
     settle(app)
     assert app.state.target_choice == "mro"
+    assert not any(i["value"].startswith("upload:") for i in app.state.target_items)
+
+
+TWO_OBJECTS_OBJ = b"""o box
+v 0 0 0
+v 1 0 0
+v 1 1 0
+v 0 1 0
+f 1 2 3
+f 1 3 4
+o cylinder
+v 3 0 0
+v 4 0 0
+v 4 1 0
+v 3 1 1
+f 5 6 7
+f 5 7 8
+"""
+
+
+def test_each_named_object_of_an_obj_is_a_part_named_alike_by_the_cli_and_the_app(app, tmp_path):
+    path = tmp_path / "two.obj"
+    path.write_bytes(TWO_OBJECTS_OBJ)
+    cli_parts = load_target(Target(mesh=str(path))).part_names
+    assert sorted(cli_parts) == ["box", "cylinder"]
+    with app.state:
+        app.state.upload_file = {
+            "name": "two.obj",
+            "size": len(TWO_OBJECTS_OBJ),
+            "content": TWO_OBJECTS_OBJ,
+        }
+    settle(app)
+    assert app.state.upload_error == "" and sorted(app.state.part_names) == sorted(cli_parts)
+    # two parts, two materials: each reaches the scene
+    materials = {"box": "solar_panel", "cylinder": "coating_1"}
+    with app.state:
+        app.state.materials = materials
+    settle(app)
+    model = app.logic.last_frame.result.target
+    assert dict(zip(model.part_names, model.part_materials, strict=True)) == materials
+    app.uploads.use_builtin()
+    settle(app)

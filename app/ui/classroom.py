@@ -42,6 +42,12 @@ KEYBOARD_SCRIPT = """
     const y = (v < z.y || v > z.y + w) ? clamp(v - w / 2, 0, m) : z.y;
     return { s: z.s, x, y };
   };
+  // "Copy link": the clipboard's answer as the message the page confirms with
+  window.trame.utils.lmapdCopy = (text) => (navigator.clipboard
+    ? navigator.clipboard.writeText(text).then(
+      () => `Link copied (${text.length} characters)`,
+      () => 'Could not copy: select the link above and press Ctrl+C')
+    : Promise.resolve('Select the link above and press Ctrl+C to copy it'));
   window.trame.utils.lmapdArray = {
     key(e, z, cursor, n, selected) {
       const moves = { ArrowLeft: [0, -1], ArrowRight: [0, 1], ArrowUp: [-1, 0], ArrowDown: [1, 0] };

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 
-from trame.widgets import html
+from trame.widgets import client, html
 from trame.widgets import vuetify3 as v3
 
 import simcore
@@ -226,6 +226,7 @@ def display_choices() -> None:
 def share_panel() -> None:
     """The link that reproduces the current frame (settings in the query string), to copy
     (app.ui.layout.LINK_SCRIPT makes it)."""
+    client.ClientStateChange(value="share_query", change="link_copied = ''")  # a new link
     with v3.VExpansionPanels(variant="accordion", classes="mt-2 share-panel"):
         with v3.VExpansionPanel():
             v3.VExpansionPanelTitle("Share this scene (link)", classes="text-body-2")
@@ -245,12 +246,21 @@ def share_panel() -> None:
                     size="small",
                     variant="tonal",
                     color="primary",
-                    click="trame.utils.lmapdLink.copy(share_query)",
+                    click=(
+                        "trame.utils.lmapdCopy(trame.utils.lmapdLink.url(share_query))"
+                        ".then((m) => { link_copied = m; })"
+                    ),
                     classes="copy-link",
+                )
+                html.Span(
+                    "{{ link_copied }}",
+                    v_if="link_copied",
+                    classes="text-caption text-success ml-2 link-copied",
+                    **html_attributes(role="status"),
                 )
                 html.Div(
                     "Whoever opens it sees this pose, array, energy, TNR, fidelity, seed and "
-                    "materials: the same points.",
+                    "materials: the same points. It lists only what differs from the start.",
                     classes="text-caption hint mt-1",
                 )
 

@@ -371,6 +371,8 @@ def build_layout(server) -> VAppLayout:
     server.state.glossary_open = False  # the glossary dialog, and the entry asked for
     server.state.glossary_term = ""
     server.state.client_only("glossary_open", "glossary_term")
+    server.state.link_copied = ""  # what "Copy link" answered (app.ui.controls.share_panel)
+    server.state.client_only("link_copied")
     with VAppLayout(server, full_height=True) as layout:
         client.Style(CSS)
         client.Script(FRAME_SCRIPT)  # before the watcher below: created first

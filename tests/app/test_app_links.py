@@ -43,12 +43,23 @@ def new_app(model) -> LmapdApp:
 
 
 def test_a_link_uses_the_command_lines_names_in_si_units(initial):
-    controls = dataclasses.replace(initial, pitch_deg=30.0, pulse_energy_mj=2.5, tnr=4.0)
+    controls = dataclasses.replace(initial, pitch_deg=30.0, pulse_energy_mj=2.5, tnr=4.1)
     query = dict(urllib.parse.parse_qsl(link_query(controls, initial)))
-    assert query["pitch_deg"] == "30.0" and query["tnr"] == "4.0"
+    assert query["pitch_deg"] == "30" and query["tnr"] == "4.1"
     assert query["pulse_energy_j"] == "0.0025"  # joules, as --set takes them
-    assert set(query) >= {"azimuth_deg", "distance_m", "pixels", "seed", "preset"}
-    assert not any(k.startswith("target.materials.") for k in query)  # none changed
+    # only what differs from the initial controls
+    assert set(query) == {"pitch_deg", "pulse_energy_j", "tnr"}
+    assert link_query(initial, initial) == ""
+
+
+def test_a_link_is_short_and_its_values_carry_no_float_noise(initial):
+    controls = dataclasses.replace(
+        initial, receiver_kind="gm_apd", gm_dead_time_ns=1001.0, distance_m=730.0
+    )
+    query = link_query(controls, initial)
+    assert query == "distance_m=730&gm.dead_time_s=1.001e-06&receiver.kind=gm_apd"
+    back, messages = controls_from_link(dict(urllib.parse.parse_qsl(query)), initial)
+    assert messages == [] and back == controls
 
 
 def test_a_link_restores_the_same_scene_and_the_same_points(model):
@@ -85,6 +96,7 @@ def test_a_link_restores_the_same_scene_and_the_same_points(model):
     [
         ("pulse_energy_mj", 0.01, 50.0, "laser.pulse_energy_j"),
         ("filter_width_nm", 0.1, 100.0, "receive.filter_width_m"),
+        ("gm_dead_time_ns", 1.0, 1e5, "gm.dead_time_s"),
     ],
 )
 def test_every_slider_value_gives_the_same_scene_after_the_round_trip(initial, key, lo, hi, si):

@@ -37,7 +37,7 @@ def test_a_manual_sun_lights_the_target_without_a_new_ray_cast(app):
     )
     assert (
         "sun.mode=manual" in app.state.share_query
-        and "sun.azimuth_deg=20.0" in app.state.share_query
+        and "sun.azimuth_deg=20" in app.state.share_query
     )
 
 

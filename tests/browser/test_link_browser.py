@@ -50,8 +50,10 @@ def test_a_link_opens_its_scene_and_the_pages_link_reproduces_it(page, app_url):
     page.get_by_role("button", name="Share this scene (link)").click()
     link = page.locator(".share-link input").input_value()
     shared = dict(urllib.parse.parse_qsl(urllib.parse.urlsplit(link).query))
-    assert shared["token"] and shared["pitch_deg"] == "30.0" and shared["pixels"] == "64"
+    assert shared["token"] and shared["pitch_deg"] == "30" and shared["pixels"] == "64"
     assert shared["pulse_energy_j"] == "0.002"
+    # only what differs from the start (the preset is the initial one)
+    assert set(shared) == {"token", *settings} - {"preset"}
 
 
 def test_a_tampered_link_falls_back_with_a_message_and_no_error_page(page, app_url):

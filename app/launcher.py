@@ -30,7 +30,10 @@ port) and proxies everything under ``/s/<session id>/`` to it:
   process that dies is noticed and forgotten; SIGINT or SIGTERM stops every child, and a child
   whose launcher vanishes (even by SIGKILL) stops when its stdin closes;
 * connections (app.connections): idle or partial ones are closed after 10 s, each address holds
-  at most a few hundred, and refusals are logged one short line each, never with the token.
+  at most a few hundred, and refusals are logged one short line each, never with the token;
+* with ``zygote`` (``lmapd app --fork-sessions``) the session processes are forked from one
+  preloaded parent (app.zygote) instead of started afresh: they share its modules, target and
+  compiled kernels.
 """
 
 from __future__ import annotations
@@ -64,6 +67,11 @@ MIB = 2**20
 # (354-370 MB, median 357 MB, with its preview's stages, scripts/bench_sessions.py, 2026-11-25);
 # the default session cap is derived from it.
 SESSION_RSS_BYTES = 370 * MIB
+# A session forked from the zygote (--fork-sessions): 10 such sessions and their parent held
+# 1,535 MB of proportional set size after each one's first 256 x 256 frame (154 MB a session;
+# 2,424 MB as processes of their own; scripts/bench_session_memory.py, 2026-11-26, a loaded
+# 2-core machine); counted at 200 MB.
+FORKED_SESSION_BYTES = 200 * MIB
 MAX_DEFAULT_SESSIONS = 30  # a class
 MEMORY_SHARE = 0.75  # of the memory available at start, for the children together
 FRAME_BYTES = security.WS_CHUNK_BYTES + 4096  # one websocket frame: a wslink chunk and its header
@@ -71,6 +79,10 @@ CLIENT_ID = re.compile(r"^[A-Za-z0-9_-]{16,64}$")
 SESSION_ENDED = 4000  # the websocket close code of an ended session (the page says so)
 NO_STORE = {"Cache-Control": "no-store"}
 SESSION_ID = re.compile(r"^/s/(?P<id>[A-Za-z0-9_-]{1,64})(?P<rest>/.*)?$")
+FORKED_LINE = re.compile(r"^lmapd-sim zygote: forked (?P<pid>\d+) for (?P<digest>[0-9a-f]{16})$")
+SESSION_LINE = re.compile(
+    r"^lmapd-sim app: http://127\.0\.0\.1:(?P<port>\d+)/\?token=(?P<token>[A-Za-z0-9_-]+)"
+)
 ADDRESS_LINE = re.compile(r"^lmapd-sim app: http://127\.0\.0\.1:(?P<port>\d+)/")
 CHILD_HOST = "127.0.0.1"
 PASSED_HEADERS = (
@@ -177,7 +189,13 @@ class Child:
         return self.proc.returncode is None
 
     def rss_bytes(self) -> int:
-        """Resident memory [bytes] (0 once the process is gone)."""
+        """Resident memory [bytes] (0 once the process is gone); of a process forked from the
+        zygote, its proportional share (PSS: the pages it shares with its parent and siblings
+        split between them), which the kernel sums cheaply in ``smaps_rollup``."""
+        if isinstance(self.proc, ForkedProcess):
+            pss = _pss_bytes(self.pid)
+            if pss is not None:
+                return pss
         try:
             return int(psutil.Process(self.pid).memory_info().rss)
         except (psutil.Error, OSError):
@@ -255,8 +273,11 @@ class Launcher:
         command: Callable[..., list[str]] = child_command,
         options: tuple[str, ...] = (),
         origins: tuple[str, ...] = (),
+        zygote: Callable[..., list[str]] | None = None,
     ):
         self.token = token
+        # sessions forked from a preloaded parent (app.zygote): its command, or None
+        self.zygote = Zygote(zygote(scene, options)) if zygote is not None else None
         self.caps = caps
         self.scene = scene
         self.command = command
@@ -545,6 +566,8 @@ class Launcher:
     # -- children ------------------------------------------------------------------------------
     async def start_child(self) -> Child:
         """Start one app process and wait until it listens. Raises StartFailed."""
+        if self.zygote is not None:
+            return await self.zygote.spawn(self)
         token = secrets.token_urlsafe(32)
         # two malloc arenas: each thread's own (64 MB of address space apiece) would eat the
         # session's address-space limit (app.main.limit_address_space) without using memory
@@ -696,7 +719,7 @@ class Launcher:
                 log.exception("reaping sessions failed")
 
     async def close(self) -> None:
-        """Stop every child (sessions and spare) and the reaper."""
+        """Stop every child (sessions and spare), the reaper and the zygote."""
         self._closing = True
         if self._reaper is not None:
             self._reaper.cancel()
@@ -707,6 +730,8 @@ class Launcher:
                 await spare
         self.sessions.clear()
         await asyncio.gather(*(self.stop_child(c) for c in list(self._all)))
+        if self.zygote is not None:
+            await self.zygote.close()
         if self._client is not None:
             await self._client.close()
 
@@ -749,6 +774,163 @@ def move_page(location: str) -> web.Response:
 
 def _query(pairs) -> str:
     return "&".join(f"{_q(k)}={_q(v)}" for k, v in pairs)
+
+
+def _pss_bytes(pid: int) -> int | None:
+    """A process's proportional set size from /proc/PID/smaps_rollup [bytes] (Linux 4.14+), or
+    None where it cannot be read."""
+    try:
+        with open(f"/proc/{pid}/smaps_rollup", "rb") as f:
+            for line in f:
+                if line.startswith(b"Pss:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
+def zygote_command(scene: str | None, options: tuple[str, ...] = ()) -> list[str]:
+    """The command of the sessions' preloaded parent (app.zygote)."""
+    return [sys.executable, "-m", "app.zygote", *(["--scene", scene] if scene else []), *options]
+
+
+class ForkedProcess:
+    """A session process forked by the zygote (not this process's child), seen through the
+    parts of ``asyncio.subprocess.Process`` the launcher uses; its exit status is unknown (-1)
+    once it is gone."""
+
+    stdin = None
+
+    def __init__(self, pid: int):
+        self.pid = pid
+        self._returncode: int | None = None
+
+    @property
+    def returncode(self) -> int | None:
+        if self._returncode is None:
+            try:
+                gone = psutil.Process(self.pid).status() == psutil.STATUS_ZOMBIE
+            except psutil.NoSuchProcess:
+                gone = True
+            if gone:
+                self._returncode = -1
+        return self._returncode
+
+    def _signal(self, sig: int) -> None:
+        if self.returncode is None:
+            os.kill(self.pid, sig)
+
+    def terminate(self) -> None:
+        self._signal(signal.SIGTERM)
+
+    def kill(self) -> None:
+        self._signal(signal.SIGKILL)
+
+    async def wait(self) -> int:
+        while self.returncode is None:
+            await asyncio.sleep(0.05)
+        return self._returncode
+
+
+class Zygote:
+    """The launcher's end of app.zygote: started on the first spawn, asked for one session per
+    ``spawn TOKEN`` line; its output tells each token's process and, once it listens, its port."""
+
+    def __init__(self, command: list[str]):
+        self.command = command
+        self.proc: asyncio.subprocess.Process | None = None
+        self.reader: asyncio.Task | None = None
+        self.ready: asyncio.Future | None = None
+        self.pids: dict[str, asyncio.Future] = {}  # token digest -> pid
+        self.ports: dict[str, asyncio.Future] = {}  # token -> port
+        self._lock = asyncio.Lock()
+
+    async def _start(self, timeout_s: float) -> None:
+        loop = asyncio.get_running_loop()
+        self.ready = loop.create_future()
+        self.proc = await asyncio.create_subprocess_exec(
+            *self.command,
+            stdin=asyncio.subprocess.PIPE,
+            stdout=asyncio.subprocess.PIPE,
+            env={
+                **os.environ,
+                "PYTHONUNBUFFERED": "1",
+                "MALLOC_ARENA_MAX": "2",
+                "NUMBA_THREADING_LAYER": "workqueue",  # GNU OpenMP's aborts forked processes
+            },
+            start_new_session=True,
+        )
+        self.reader = asyncio.create_task(self._read())
+        await asyncio.wait_for(asyncio.shield(self.ready), timeout_s)
+
+    async def _read(self) -> None:
+        from app.zygote import READY  # noqa: PLC0415  (zygote mode only)
+
+        while line := await self.proc.stdout.readline():
+            text = line.decode(errors="replace").strip()
+            if text == READY and not self.ready.done():
+                self.ready.set_result(True)
+            elif found := FORKED_LINE.match(text):
+                future = self.pids.get(found["digest"])
+                if future is not None and not future.done():
+                    future.set_result(int(found["pid"]))
+            elif found := SESSION_LINE.match(text):
+                future = self.ports.get(found["token"])
+                if future is not None and not future.done():
+                    future.set_result(int(found["port"]))
+        problem = StartFailed(f"the sessions' parent exited with {await self.proc.wait()}")
+        for future in (self.ready, *self.pids.values(), *self.ports.values()):
+            if future is not None and not future.done():
+                future.set_exception(problem)
+
+    async def spawn(self, launcher: Launcher) -> Child:
+        """Fork one session and wait until it listens. Raises StartFailed."""
+        from app.zygote import digest  # noqa: PLC0415
+
+        timeout_s = launcher.caps.start_timeout_s
+        token = secrets.token_urlsafe(32)
+        loop = asyncio.get_running_loop()
+        pid_future = self.pids[digest(token)] = loop.create_future()
+        port_future = self.ports[token] = loop.create_future()
+        child = None
+        try:
+            async with self._lock:
+                if self.proc is None or self.proc.returncode is not None:
+                    await self._start(timeout_s)
+                self.proc.stdin.write(f"spawn {token}\n".encode())
+                await self.proc.stdin.drain()
+            pid = await asyncio.wait_for(pid_future, timeout_s)
+            child = Child(ForkedProcess(pid), 0, token, time.monotonic())  # type: ignore[arg-type]
+            launcher._all.add(child)
+            child.port = await asyncio.wait_for(port_future, timeout_s)
+            return child
+        except (TimeoutError, StartFailed, ConnectionError, OSError) as exc:
+            if child is not None:
+                await launcher.stop_child(child)
+            launcher.n_start_failures += 1
+            raise StartFailed(str(exc) or type(exc).__name__) from None
+        finally:
+            self.pids.pop(digest(token), None)
+            self.ports.pop(token, None)
+            for future in (pid_future, port_future):
+                if future.done() and not future.cancelled():
+                    future.exception()  # read: never "never retrieved"
+
+    async def close(self) -> None:
+        proc = self.proc
+        if proc is None:
+            return
+        if proc.returncode is None:
+            with contextlib.suppress(ProcessLookupError):
+                proc.terminate()
+            try:
+                await asyncio.wait_for(proc.wait(), 10)
+            except TimeoutError:
+                with contextlib.suppress(ProcessLookupError):
+                    proc.kill()
+                await proc.wait()
+        if self.reader is not None:
+            self.reader.cancel()
 
 
 def _open(n: int) -> str:

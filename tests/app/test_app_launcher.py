@@ -463,8 +463,11 @@ def _descendants(pid: int) -> list[psutil.Process]:
 
 
 @pytest.mark.slow
-def test_the_real_launcher_proxies_a_session_and_leaves_no_process_after_sigterm(tmp_path):
-    options = ("--max-sessions", "2", "--no-spare")
+@pytest.mark.parametrize("fork", [False, True], ids=["processes", "forked"])
+def test_the_real_launcher_proxies_a_session_and_leaves_no_process_after_sigterm(tmp_path, fork):
+    """A session through the real launcher: its own process (``python -m app``), or forked from
+    the preloaded parent (``--fork-sessions``: the parent and the session)."""
+    options = ("--max-sessions", "2", "--no-spare") + (("--fork-sessions",) if fork else ())
     with app_process(log_path=tmp_path / "server.log", sessions=True, app_args=options) as running:
 
         async def body():
@@ -496,22 +499,24 @@ def test_the_real_launcher_proxies_a_session_and_leaves_no_process_after_sigterm
         state, frame = run(body)
         assert state["pitch_deg"] == 0 and frame["n_points"] > 0
         children = _descendants(running.pid)
-        assert len(children) == 1
+        assert len(children) == 1 + fork
         assert not any(running.token in " ".join(c.cmdline()) for c in children)
         os.kill(running.pid, signal.SIGTERM)
         gone, alive = psutil.wait_procs(children, timeout=WAIT_S)
-        assert alive == [] and len(gone) == 1
+        assert alive == [] and len(gone) == 1 + fork
 
 
 @pytest.mark.slow
-def test_sessions_stop_when_their_launcher_is_killed(tmp_path):
+@pytest.mark.parametrize("fork", [False, True], ids=["processes", "forked"])
+def test_sessions_stop_when_their_launcher_is_killed(tmp_path, fork):
     cmd = [sys.executable, "-m", "app", "--port", "0", "--max-sessions", "1"]
+    cmd += ["--fork-sessions"] if fork else []
     root = Path(__file__).resolve().parents[2]
     with open(tmp_path / "out.log", "w+b") as out:
         proc = subprocess.Popen(cmd, cwd=root, stdout=out, stderr=subprocess.STDOUT)
         try:
             deadline = time.monotonic() + WAIT_S
-            while not _descendants(proc.pid):  # the spare
+            while len(_descendants(proc.pid)) < 1 + fork:  # the spare (and its parent)
                 assert proc.poll() is None and time.monotonic() < deadline
                 time.sleep(0.1)
             children = _descendants(proc.pid)
@@ -643,7 +648,8 @@ def test_lmapd_app_passes_the_session_and_proxy_options_on(monkeypatch):
     monkeypatch.setattr(app_main, "main", lambda argv: seen.append(argv) or 0)
     argv = ["app", "--input-idle-min", "5", "--max-age-h", "2", "--frame-memory-mb", "800"]
     argv += ["--public-url", "https://a.example", "--public-url", "https://b.example:8443"]
-    assert cli.main(argv) == 0
+    assert cli.main([*argv, "--fork-sessions"]) == 0
     given = app_main.parse_args(seen[0])
+    assert given.fork_sessions
     assert (given.input_idle_min, given.max_age_h, given.frame_memory_mb) == (5, 2, 800)
     assert given.public_url == ["https://a.example", "https://b.example:8443"]

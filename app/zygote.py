@@ -1,0 +1,150 @@
+"""``python -m app.zygote [app options]``: the parent of the launcher's session processes.
+
+A session process spent about 2.3 s importing numpy, scipy, trame and vtk and 1 s loading its
+target before it could listen, and held its own copy of all of it and of the compiled kernels its
+first frame loaded. The zygote does that once (its kernels on numba's fork-safe workqueue
+threads, see :func:`warm_up`), freezes the objects it made out of the garbage collector's reach
+(``gc.freeze``: their pages stay shared) and then, for each line
+``spawn TOKEN`` on its stdin, forks a session: the child builds its own app (state, server,
+pipeline) on the shared modules and target and serves as ``python -m app --shared --token-stdin``
+would, printing ``lmapd-sim app: http://127.0.0.1:PORT/?token=TOKEN`` once it listens. The zygote
+prints ``lmapd-sim zygote: forked PID for TOKEN-DIGEST`` first (the digest: sha256 of the token,
+16 hex digits), so that the launcher knows the process of each token.
+
+A child stops with SIGTERM (as a session does) and when the zygote dies (the kernel's parent-death
+signal); the zygote stops its children and exits when its stdin closes (the launcher is gone) or
+on SIGTERM, and reaps them as they exit.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import gc
+import hashlib
+import os
+import signal
+import sys
+
+PR_SET_PDEATHSIG = 1  # prctl(2)
+READY = "lmapd-sim zygote: ready"
+
+
+def digest(token: str) -> str:
+    return hashlib.sha256(token.encode()).hexdigest()[:16]
+
+
+def _die_with_parent() -> None:
+    """SIGTERM this process when its parent (the zygote) dies (Linux; elsewhere nothing)."""
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    except (OSError, AttributeError):
+        pass
+
+
+def warm_up(scene) -> None:
+    """Compute a tiny frame (8 x 8 pixels) at the scene's fidelity and at the preview's, so that
+    the compiled kernels and the tables every frame needs are loaded here once, in pages the
+    sessions share (a session's own memory after its first 256 x 256 frame: 63 MB instead of
+    190 MB). The kernels' threads are numba's workqueue layer (the launcher starts the zygote
+    with NUMBA_THREADING_LAYER=workqueue): GNU OpenMP's, the default, aborts a process forked
+    after using it."""
+    import simcore  # noqa: PLC0415
+    from app.engine import Engine  # noqa: PLC0415
+
+    tiny = simcore.with_overrides(scene, pixels=8)
+    simcore.Pipeline().run(tiny)
+    simcore.Pipeline().run(Engine.preview_scene(tiny))
+
+
+def main(argv: list[str] | None = None) -> int:
+    from app import main as app_main  # noqa: PLC0415  (after the version check of app/__main__)
+
+    options = sys.argv[1:] if argv is None else argv
+    args = app_main.parse_args(
+        ["--shared", "--token-stdin", "--host", "127.0.0.1", "--port", "0", *options]
+    )
+    import simcore  # noqa: PLC0415
+    from app.engine import Engine  # noqa: PLC0415
+
+    try:
+        scene = simcore.load_scene(args.scene)
+        model = simcore.load_target(scene.target)
+        warm_up(scene)
+    except (simcore.SceneError, simcore.TargetError, OSError) as exc:
+        print(f"lmapd app: {exc}", file=sys.stderr)
+        return 2
+    budget = int(max(1.0, args.frame_memory_mb) * 2**20)
+    children: set[int] = set()
+
+    def reap(*_) -> None:
+        while children:
+            try:
+                pid, _status = os.waitpid(-1, os.WNOHANG)
+            except ChildProcessError:
+                return
+            if pid == 0:
+                return
+            children.discard(pid)
+
+    def stop(*_) -> None:
+        for pid in list(children):
+            try:
+                os.kill(pid, signal.SIGTERM)
+            except ProcessLookupError:
+                children.discard(pid)
+        raise SystemExit(0)
+
+    signal.signal(signal.SIGCHLD, reap)
+    signal.signal(signal.SIGTERM, stop)
+    gc.collect()
+    gc.freeze()  # the modules' and the target's objects: never written by the collector
+    print(READY, flush=True)
+    for line in sys.stdin:
+        words = line.split()
+        if len(words) != 2 or words[0] != "spawn":
+            continue
+        token = words[1]
+        pid = os.fork()
+        if pid == 0:  # the session
+            signal.signal(signal.SIGCHLD, signal.SIG_DFL)
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
+            _die_with_parent()
+            os._exit(_serve(app_main, args, scene, Engine(scene, model, budget), token, budget))
+        children.add(pid)
+        print(f"lmapd-sim zygote: forked {pid} for {digest(token)}", flush=True)
+    stop()
+    return 0
+
+
+def _serve(app_main, args, scene, engine, token: str, budget: int) -> int:
+    """A forked session: the app on its own server until SIGTERM (as ``python -m app --shared
+    --token-stdin`` runs it); its exit status."""
+    try:
+        sys.stdin.close()  # the zygote's: the launcher's spawn lines are not for the session
+        app = app_main.LmapdApp(
+            scene,
+            engine=engine,
+            previews=not args.no_preview,
+            studies_dir=args.studies,
+        )
+        app.token = token
+        signal.signal(signal.SIGTERM, app_main._interrupt)
+        app_main.limit_address_space(budget + app_main.HEADROOM_BYTES)
+        return app_main.serve_until_stopped(lambda: app.start(args.host, args.port), args)
+    except BaseException:  # a session that cannot start says why and exits; never returns
+        import traceback  # noqa: PLC0415
+
+        traceback.print_exc()
+        return 1
+    finally:
+        sys.stdout.flush()
+
+
+if __name__ == "__main__":
+    from app.versions import FrameworkVersionError, check_framework_versions
+
+    try:
+        check_framework_versions()
+    except FrameworkVersionError as exc:
+        raise SystemExit(f"python -m app.zygote: {exc}") from None
+    raise SystemExit(main())

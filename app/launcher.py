@@ -41,6 +41,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import dataclasses
+import hashlib
 import hmac
 import html
 import json
@@ -789,6 +790,14 @@ def _pss_bytes(pid: int) -> int | None:
     return None
 
 
+ZYGOTE_READY = "lmapd-sim zygote: ready"  # what app.zygote prints once it can fork
+
+
+def token_digest(token: str) -> str:
+    """How app.zygote names a session's token in its output (never the token itself)."""
+    return hashlib.sha256(token.encode()).hexdigest()[:16]
+
+
 def zygote_command(scene: str | None, options: tuple[str, ...] = ()) -> list[str]:
     """The command of the sessions' preloaded parent (app.zygote)."""
     return [sys.executable, "-m", "app.zygote", *(["--scene", scene] if scene else []), *options]
@@ -864,11 +873,9 @@ class Zygote:
         await asyncio.wait_for(asyncio.shield(self.ready), timeout_s)
 
     async def _read(self) -> None:
-        from app.zygote import READY  # noqa: PLC0415  (zygote mode only)
-
         while line := await self.proc.stdout.readline():
             text = line.decode(errors="replace").strip()
-            if text == READY and not self.ready.done():
+            if text == ZYGOTE_READY and not self.ready.done():
                 self.ready.set_result(True)
             elif found := FORKED_LINE.match(text):
                 future = self.pids.get(found["digest"])
@@ -885,12 +892,10 @@ class Zygote:
 
     async def spawn(self, launcher: Launcher) -> Child:
         """Fork one session and wait until it listens. Raises StartFailed."""
-        from app.zygote import digest  # noqa: PLC0415
-
         timeout_s = launcher.caps.start_timeout_s
         token = secrets.token_urlsafe(32)
         loop = asyncio.get_running_loop()
-        pid_future = self.pids[digest(token)] = loop.create_future()
+        pid_future = self.pids[token_digest(token)] = loop.create_future()
         port_future = self.ports[token] = loop.create_future()
         child = None
         try:
@@ -910,7 +915,7 @@ class Zygote:
             launcher.n_start_failures += 1
             raise StartFailed(str(exc) or type(exc).__name__) from None
         finally:
-            self.pids.pop(digest(token), None)
+            self.pids.pop(token_digest(token), None)
             self.ports.pop(token, None)
             for future in (pid_future, port_future):
                 if future.done() and not future.cancelled():

@@ -20,17 +20,14 @@ from __future__ import annotations
 
 import ctypes
 import gc
-import hashlib
 import os
 import signal
 import sys
 
+from app.launcher import ZYGOTE_READY as READY
+from app.launcher import token_digest as digest
+
 PR_SET_PDEATHSIG = 1  # prctl(2)
-READY = "lmapd-sim zygote: ready"
-
-
-def digest(token: str) -> str:
-    return hashlib.sha256(token.encode()).hexdigest()[:16]
 
 
 def _die_with_parent() -> None:

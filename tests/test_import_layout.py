@@ -125,8 +125,9 @@ APP_FLOORS = (
     ("app.payloads", "app.engine"),
     ("app.logic",),
     ("app.ui",),
-    # the server: joins them, guards the door; the launcher: a process per session
-    ("app.main", "app.__main__", "app.security", "app.launcher"),
+    # the server: joins them, guards the door and the connections; the launcher: a process per
+    # session (started, or forked from the zygote)
+    ("app.main", "app.__main__", "app.security", "app.connections", "app.launcher", "app.zygote"),
 )
 
 

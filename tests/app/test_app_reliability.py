@@ -69,7 +69,7 @@ def test_main_listens_on_loopback_unless_a_host_is_given(monkeypatch):
         def __init__(self, scene, **_):
             pass
 
-        def start(self, host, port):
+        def start(self, host, port, origins=()):
             started.append((host, port))
 
     monkeypatch.setattr(main_mod, "LmapdApp", FakeApp)

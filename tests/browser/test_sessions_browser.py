@@ -90,7 +90,7 @@ def test_a_link_made_in_one_tab_opens_a_new_session_with_the_same_scene(page, la
     link = page.locator(".share-link input").input_value()
     parts = urllib.parse.urlsplit(link)
     shared = dict(urllib.parse.parse_qsl(parts.query))
-    assert parts.path == "/" and shared["token"] and shared["pitch_deg"] == "25.0"
+    assert parts.path == "/" and shared["token"] and shared["pitch_deg"] == "25"
     student = page.context.new_page()
     try:
         open_tab(student, link)
@@ -137,3 +137,16 @@ def test_over_the_cap_a_503_page_says_how_many_are_open(page, artifacts_dir):
             assert session_of(second)
         finally:
             second.close()
+
+
+def test_a_session_ended_for_want_of_input_says_so_on_its_page(page, artifacts_dir):
+    """A page left without input past --input-idle-min keeps its socket but loses its session
+    (a held socket cannot keep a session alive); the page says so."""
+    log_path = artifacts_dir / "app-server-sessions-idle.log"
+    options = ("--max-sessions", "2", "--no-spare", "--input-idle-min", "0.1")  # 6 s
+    with app_server(log_path=log_path, sessions=True, app_args=options) as url:
+        page.goto(url + SMALL)
+        page.wait_for_url(moved)
+        note = page.locator(".session-ended")
+        note.wait_for(timeout=120_000)
+        assert note.inner_text() == "Session ended: reload for a new one."

@@ -19,7 +19,7 @@ from simcore import cli, io
 
 pytestmark = pytest.mark.slow
 
-N_KILLS = 12  # each a run of about a second: 12 keep the test near 20 s
+N_KILLS = 10  # each a run of about a second under load: 10 keep the test near 20 s
 # imported once by the fork server (a run then spends its time simulating, not importing)
 PRELOAD = [
     "simcore.cli",

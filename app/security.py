@@ -252,6 +252,7 @@ class Door:
         self.origins = {o for o in (normal_origin(u) for u in origins) if o}
         self.n_connections = 0
         self.n_refused = 0
+        self.log = connections.ShortLog(log)  # one line per refusal, a few a second at most
 
     def cookie_name(self, request: web.Request) -> str:
         return f"lmapd-token-{_local_port(request)}"
@@ -294,6 +295,7 @@ class Door:
             return await self._websocket(request, handler, authorised)
         if not authorised:
             self.n_refused += 1
+            self.log.warning("token", "refused a request without the token from %s", request.remote)
             return web.Response(
                 status=403,
                 text="Forbidden: open the address that `lmapd app` printed (it carries the "
@@ -311,11 +313,15 @@ class Door:
         if problem is None and not authorised:
             problem = "no valid access token"
         if problem is None and self.n_connections >= self.limits.max_connections:
-            log.warning("refused a websocket: %d connections already", self.n_connections)
+            self.log.warning(
+                "cap", "refused a websocket: %d connections already", self.n_connections
+            )
             self.n_refused += 1
             return web.Response(status=503, text="Too many connections\n")
         if problem is not None:
-            log.warning("refused a websocket from %s: %s", request.remote, problem)
+            self.log.warning(
+                "websocket", "refused a websocket from %s: %s", request.remote, problem
+            )
             self.n_refused += 1
             return web.Response(status=403, text="Forbidden\n")
         request[AUTHORISED] = True

@@ -653,3 +653,20 @@ def test_lmapd_app_passes_the_session_and_proxy_options_on(monkeypatch):
     assert given.fork_sessions
     assert (given.input_idle_min, given.max_age_h, given.frame_memory_mb) == (5, 2, 800)
     assert given.public_url == ["https://a.example", "https://b.example:8443"]
+
+
+def test_refusals_are_logged_a_few_a_window_and_the_held_back_ones_counted(caplog):
+    import logging
+
+    now = [0.0]
+    short = connections.ShortLog(
+        logging.getLogger("lmapd.test"), per_window=3, window_s=10, clock=lambda: now[0]
+    )
+    with caplog.at_level(logging.WARNING, logger="lmapd.test"):
+        logged = [short.warning("token", "refused %d", i) for i in range(100)]
+        assert logged == [True] * 3 + [False] * 97
+        assert short.warning("origin", "another kind") is True  # each kind its own window
+        now[0] = 10.0
+        assert short.warning("token", "refused %d", 100) is True
+    lines = [r.getMessage() for r in caplog.records]
+    assert len(lines) == 5 and lines[-1] == "refused 100 (97 more like it not logged)"

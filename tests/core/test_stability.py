@@ -1,6 +1,7 @@
 """Stability at the extremes (issue 25): every value inside a key's documented range runs, or is
 refused before running with one message naming the key."""
 
+import io
 import math
 import subprocess
 import sys
@@ -329,3 +330,35 @@ def _numbers(value, path="summary"):
             yield from _numbers(v, f"{path}[{i}]")
     elif isinstance(value, (int, float)) and not isinstance(value, bool):
         yield path, value
+
+
+# -- the Monte Carlo's progress on a terminal ----------------------------------------------------
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_a_long_monte_carlo_frame_shows_its_progress_on_a_terminal_only(monkeypatch):
+    """The bar appears after PROGRESS_DELAY_S on a terminal (here made 0) and never on a pipe."""
+    from simcore.montecarlo import gate
+
+    scene = with_overrides(
+        Scene(), {"pixels": 16, "fidelity.subrays": 1, "fidelity.noise_model": "montecarlo"}
+    )
+    monkeypatch.setattr(gate, "PROGRESS_DELAY_S", 0.0)
+    calls = []
+    monkeypatch.setattr(gate, "_gate_chunk", _counted(gate._gate_chunk, calls))
+    for seed, (stream, shown) in enumerate(((_Terminal(), True), (io.StringIO(), False))):
+        monkeypatch.setattr(sys, "stderr", stream)
+        simcore.simulate(with_overrides(scene, {"seed": seed}))
+        assert calls  # the gate ran (not a cached frame)
+        calls.clear()
+        assert ("Monte Carlo" in stream.getvalue()) is shown
+
+
+def _counted(fn, calls):
+    def wrapped(*args, **kwargs):
+        calls.append(True)
+        return fn(*args, **kwargs)
+
+    return wrapped

@@ -29,7 +29,7 @@ def test_paper_scene_images_the_mro_with_plausible_figures():
     target = ~res.attributes["is_outlier"]
     assert np.all(np.abs(res.attributes["range_m"][target] - 500.0) < 6.0)  # within the MRO's depth
     assert set(np.unique(res.attributes["material_id"][target])) <= {2, 3, 4}  # panel, coatings
-    assert s["target"]["credit"].startswith("3D model: NASA")
+    assert s["target"]["credit"].startswith("3D model: Courtesy NASA")
 
 
 def test_a_tnr_change_reruns_only_detection_and_the_cloud():

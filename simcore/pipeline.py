@@ -25,9 +25,18 @@ from .quality import QUALITY
 from .receivers import DETECTION, RECEIVER
 from .result import Result, Waveform
 from .scene import Scene, SceneError, with_overrides
-from .stage import Stage
+from .stage import _SHOULD_STOP, Cancelled, Stage, stop_check
 
-__all__ = ["CHAIN", "STAGES", "Cancelled", "Pipeline", "Result", "Waveform", "simulate"]
+__all__ = [
+    "CHAIN",
+    "STAGES",
+    "Cancelled",
+    "Pipeline",
+    "Result",
+    "Waveform",
+    "simulate",
+    "stop_check",
+]
 
 # the imaging chain, in order: each stage takes the scene and its upstream stages' outputs
 CHAIN: tuple[Stage, ...] = (
@@ -44,10 +53,6 @@ STAGES = tuple(stage.name for stage in CHAIN)
 # stages computed only when asked for (``Pipeline.run(scene, extras=...)``, or on first use
 # through the Result): the imaging-quality metrics against the true mesh     (quality)
 OPTIONAL: dict[str, Stage] = {QUALITY.name: QUALITY}
-
-
-class Cancelled(Exception):
-    """Pipeline.run was told to stop (its result would be stale)."""
 
 
 class Pipeline:
@@ -85,12 +90,16 @@ class Pipeline:
         if "echo" not in self._cache:  # the first frame: the echo kernel loads meanwhile
             preload(scene_pulse_shape(scene))
         chain = (*CHAIN, *(OPTIONAL[name] for name in extras))
-        with parallel.blas_serial():
-            for stage in chain:
-                keys[stage.name] = (stage.reads(scene), *(keys[u] for u in stage.upstream))
-                outputs[stage.name], timings[stage.name] = self._output(
-                    stage, scene, keys[stage.name], outputs, should_stop
-                )
+        token = _SHOULD_STOP.set(should_stop)
+        try:
+            with parallel.blas_serial():
+                for stage in chain:
+                    keys[stage.name] = (stage.reads(scene), *(keys[u] for u in stage.upstream))
+                    outputs[stage.name], timings[stage.name] = self._output(
+                        stage, scene, keys[stage.name], outputs, should_stop
+                    )
+        finally:
+            _SHOULD_STOP.reset(token)
         return Result(
             scene=scene,
             cloud=outputs["cloud"],

@@ -9,6 +9,7 @@ changes (``tests/core/test_cache_keys.py`` changes every scene key to catch that
 
 from __future__ import annotations
 
+import contextvars
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -17,6 +18,23 @@ import numpy as np
 
 if TYPE_CHECKING:
     from .scene import Scene
+
+
+class Cancelled(Exception):
+    """Pipeline.run was told to stop (its result would be stale)."""
+
+
+# the ``should_stop`` of the Pipeline.run under way in this thread (None: none, or no callback)
+_SHOULD_STOP: contextvars.ContextVar[Callable[[], bool] | None] = contextvars.ContextVar(
+    "simcore_should_stop", default=None
+)
+
+
+def stop_check() -> Callable[[], bool] | None:
+    """The ``should_stop`` of the Pipeline.run under way in this thread, for a long stage to
+    poll between its blocks (from its own worker threads too: take it in the stage's thread);
+    a True answer should end the stage with :class:`Cancelled`."""
+    return _SHOULD_STOP.get()
 
 
 @dataclass(frozen=True, kw_only=True)

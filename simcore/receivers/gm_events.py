@@ -34,6 +34,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..stage import Cancelled, stop_check
+
 _THREADS = max(1, min(2, os.cpu_count() or 1))
 PAIRS_PER_CHUNK = 1 << 19  # (pixel, pulse) pairs simulated at once by one thread
 X_END = 60.0  # G(x) beyond 60 s is 1 - 61 e^-60 = 1 - 5e-25: an element's process has ended
@@ -168,8 +170,12 @@ def simulate_frame(
     lit_of = np.full(n_pixels, -1, dtype=np.int64)
     lit_of[rates.lit_pixel] = np.arange(len(rates.lit_pixel))
 
+    stop = stop_check()  # a frame no longer wanted ends between chunks
+
     def work(job):
         (p0, p1), g = job
+        if stop is not None and stop():
+            raise Cancelled("stopped while drawing the avalanches")
         return _chunk_events(g, rates, lit_of, p0, p1, detector, int(n_pulses))
 
     jobs = list(zip(bounds, children[:-1], strict=True))

@@ -111,3 +111,22 @@ def test_any_combination_of_the_controls_answers_without_a_traceback(app, caplog
     frame = app.logic.last_frame
     if frame is not None and frame.result.scene.receiver.kind == "gm_apd":
         assert len(frame.result.receiver.events) < 1.2 * MAX_FRAME_AVALANCHES
+
+
+def test_a_frame_no_longer_wanted_stops_while_its_avalanches_are_drawn():
+    """The runner's should_stop reaches into the Geiger-mode event simulation (between its
+    chunks), not only between stages: a frame abandoned for a newer one ends there."""
+    scene = simcore.with_overrides(
+        simcore.load_scene(), {"pixels": 48, "fidelity.subrays": 1, "receiver.kind": "gm_apd"}
+    )
+    pipeline = simcore.Pipeline()
+    calls = []
+
+    def should_stop() -> bool:  # asked before each of the 6 stages up to the receiver, then in it
+        calls.append(1)
+        return len(calls) > 6
+
+    with pytest.raises(simcore.Cancelled, match="while drawing the avalanches"):
+        pipeline.run(scene, should_stop=should_stop)
+    assert pipeline.cached("echo", scene) is not None
+    assert pipeline.cached("receiver", scene) is None

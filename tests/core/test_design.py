@@ -119,7 +119,7 @@ SMALL = {
     "envelope": {"pose.distance_m": [400.0, 600.0], "pose.pitch_deg": [0.0]},
     "variables": {
         "laser.pulse_energy_j": {"low": 1e-4, "high": 1e-2, "log": True},
-        "timing.tnr": {"low": 3.0, "high": 8.0},
+        "timing.tnr": {"low": 4.5, "high": 5.5},  # three gross-error tables (TNR 4.5, 5, 5.5)
     },
     "requirements": {
         "quality.precision": ">= 0.3",  # 16 x 16 pixels: wide footprints, mixed pixels

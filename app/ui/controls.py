@@ -206,9 +206,20 @@ def materials_panel() -> None:
                     )
 
 
+def _explained_toggle(label: str, key: str, choices: list) -> None:
+    """A labelled one-of-several choice with its glossary button beside the label."""
+    with html.Div(classes=f"control control-{key}"):
+        with html.Div(classes="control-label text-body-2 d-flex align-center"):
+            html.Span(label)
+            glossary.info_button(key, label)
+        button_toggle(key, choices, label=label)
+
+
 def display_choices() -> None:
     with html.Div(classes="control"):  # five choices: the buttons wrap in the drawer
-        html.Div("Colour points by", classes="control-label text-body-2")
+        with html.Div(classes="control-label text-body-2 d-flex align-center"):
+            html.Span("Colour points by")
+            glossary.info_button("color_by", "Colour points by")
         button_toggle(
             "color_by",
             [
@@ -315,7 +326,7 @@ def sunlight() -> None:
     """The Sun (none: the paper's dark sky; manual: azimuth and elevation in the target's body
     frame; from the orbit: the epoch's ephemeris and the fly-around's time) and the receiver's
     band-pass filter, which decides how much of its light gets in."""
-    labelled_toggle(
+    _explained_toggle(
         "Sun",
         "sun_mode",
         [
@@ -323,7 +334,6 @@ def sunlight() -> None:
             ("Manual", "manual", "sun-manual"),
             ("Orbit", "orbit", "sun-orbit"),
         ],
-        div_classes="control control-sun_mode",
     )
     with html.Div(v_show="sun_mode === 'manual'", classes="sun-manual-controls"):
         slider("sun_azimuth_deg")
@@ -341,11 +351,10 @@ def sunlight() -> None:
 def receiver_choice() -> None:
     """The receiver: the paper's linear-mode APD array or a Geiger-mode (single-photon) array
     with its own parameters; the chart then shows photon-count histograms."""
-    labelled_toggle(
+    _explained_toggle(
         "Receiver",
         "receiver_kind",
         [("Linear mode", "lm_apd", "receiver-lm"), ("Geiger mode", "gm_apd", "receiver-gm")],
-        div_classes="control control-receiver_kind",
     )
     with html.Div(v_show="receiver_kind === 'gm_apd'", classes="gm-controls"):
         for key in (

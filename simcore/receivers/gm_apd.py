@@ -1,7 +1,8 @@
 """The Geiger-mode (single-photon) APD array, ``receiver.kind = "gm_apd"``.
 
 Response (the receiver stage): every pixel's primary event rate, the echo's photoelectrons per
-pulse, and the frame itself: ``gm.pulses`` pulses of avalanches of every pixel
+pulse (the frame's pulses carry ``laser.pulse_energy_j`` less ``gm.attenuation_db``: photon-starved
+by default), and the frame itself: ``gm.pulses`` pulses of avalanches of every pixel
 (:mod:`simcore.receivers.gm_events`: Poisson primaries from the optical echo of Eqs. 1, 29, 30,
 background and dark counts; non-paralysable dead time reset per gate, jitter, TDC bins,
 afterpulsing, crosstalk), kept as a sparse per-pixel histogram.
@@ -10,9 +11,12 @@ Detection (the detection stage; a threshold change re-runs only this): each pixe
 window of the width of the pulse, its counts against a threshold set from the expected
 background counts for the false-alarm probability of a Gaussian threshold at ``timing.tnr``,
 and the range by the centroid of the (Coates-corrected, ``gm.coates``) histogram around it
-(:mod:`simcore.receivers.gm_histogram`). A detected window on the echo gives the pixel's point;
-one elsewhere (background, dark counts) an outlier. The single-pulse first-photon cloud is
-:func:`first_photon_cloud`.
+(:mod:`simcore.receivers.gm_histogram`), or by the first-photon fit of its first avalanches
+(``gm.pileup_correction = "fit"``). A detected window on the echo gives the pixel's point;
+one elsewhere (background, dark counts) an outlier. Each lit pixel's range bias and sd as that
+estimator gives them at any flux (pile-up, finite pulses) are predicted from its expected
+histogram (:mod:`simcore.receivers.gm_pileup`): ``range_sigma_m`` and the summary's ``gm.*``
+figures. The single-pulse first-photon cloud is :func:`first_photon_cloud`.
 
 The model: docs/physics.md#geiger-mode.
 """
@@ -429,8 +433,11 @@ def detect(scene: Scene, echo: EchoStage, rx: GmResponse) -> GmDetection:
     a_num = np.asarray(echo.arrivals_s) * np.asarray(echo.weights)
     w_sum = np.asarray(echo.weights).sum(axis=1)
     r_true_m = 0.5 * C * a_num.sum(axis=1) / np.where(w_sum > 0, w_sum, 1.0)
-    p_d, _ = _predicted(scene, echo, rx, k_t[echo.pixel])
+    p_d, sigma_weak_m = _predicted(scene, echo, rx, k_t[echo.pixel])
     pred_m, sigma_m, skew = predicted_range_m(scene, echo, rx, pre, length, k_t[echo.pixel])
+    # where the expected histogram holds no excess over the background (a pixel detected by
+    # chance), the weak-signal sd stands
+    sigma_m = np.where(np.isfinite(sigma_m), sigma_m, sigma_weak_m)
     figures = pileup_figures(scene, rx.signal_pe, pred_m - r_true_m, sigma_m, skew, detected)
     figures.update(measured_figures(range_m - r_true_m, detected))
     false_pixel = np.minimum(1.0, n_windows * special.pdtrc(k_t - 1.0, mu_window))
@@ -616,13 +623,17 @@ def pileup_figures(scene: Scene, signal_pe, bias_m, sigma_m, skew, detected) -> 
     """The summary's Geiger-mode figures, predicted for the histogram's estimator [m]: the
     range bias, the median of the detected pixels' errors (of the mixture of their laws, each
     N(b_i - g_i sigma_i / 6, sigma_i^2): its median by the Cornish-Fisher term of its skewness
-    g_i, and pixels of different flux have different biases), and the scatter, the
+    g_i where it has under one photoelectron per pulse, and pixels of different flux have
+    different biases), and the scatter, the
     sd of those errors about their mean, sqrt(mean sigma_i^2 + Var b_i); the share of lit pixels
     with over one photoelectron per pulse (their echo fires them in more than 1 - 1/e of the
     pulses: piled up), and a warning when most are."""
     sel = detected & np.isfinite(bias_m) & np.isfinite(sigma_m)
     sat = float(np.mean(signal_pe > 1.0)) if len(signal_pe) else 0.0
-    median_i = bias_m[sel] - skew[sel] * sigma_m[sel] / 6.0
+    # the skewness of a centroid of few counts (not of a piled-up estimate, whose law the
+    # rare re-armed pulses shape)
+    starved = np.asarray(signal_pe)[sel] <= 1.0
+    median_i = bias_m[sel] - np.where(starved, skew[sel], 0.0) * sigma_m[sel] / 6.0
     bias = mixture_median(median_i, sigma_m[sel]) if sel.any() else None
     # the cloud's scatter about its mean: each pixel's sd and the spread of the pixels' biases
     spread = np.mean(sigma_m[sel] ** 2) + np.var(bias_m[sel]) if sel.any() else np.nan

@@ -46,7 +46,9 @@ SMALL_MEAN_A = 30.0  # below this mean of A the moments are summed over A exactl
 POISSON_MU_MAX = 60.0  # misses' Poisson table up to this mean (beyond: the delta method)
 CELLS_PER_SIGMA = 2.0  # fine cells per jitter sd (and per bin at least 2, at most 16; 2 and 16
 # give the same bias within 0.3 mm at 0.1-10^4 pe, 250 ps bins, 200 ps jitter)
-ROW_BLOCK = 2048  # pixels per block of the fine model
+MAX_BINS = 512  # bins of a modelled window at most (finer TDC bins are merged)
+BLOCK_VALUES = 1 << 20  # fine cells (or bins) of a block of pixels at most (8 MB per array)
+MOMENT_CHUNK = 1 << 14  # bins whose moments are summed over A at once
 
 
 # ----------------------------------------------------------------------------------------------
@@ -101,7 +103,7 @@ def _poisson_log_table() -> tuple[np.ndarray, ...]:
 
 def _u_index(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The u grid's cell of each h and the weight of its upper node."""
-    u = np.minimum(-np.log1p(-np.minimum(h, 1.0 - 1e-300)), U_MAX) / U_STEP
+    u = np.minimum(-np.log1p(-np.clip(h, 0.0, 1.0 - 1e-16)), U_MAX) / U_STEP
     i = np.minimum(u.astype(np.intp), len(_u_grid()) - 2)
     return i, u - i
 
@@ -170,9 +172,13 @@ def coates_bin_moments(n_pulses: int, alpha: np.ndarray, h: np.ndarray) -> np.nd
     out = np.zeros((4, *mean_a.shape))
     live = (mean_a > 1e-12) & (h > 0)
     lo_mean = 0.0
+    chunks = []
     for hi_mean, k_max in _A_SUM_CLASSES:
         sel = np.flatnonzero(live & (mean_a >= lo_mean) & (mean_a < hi_mean))
         lo_mean = hi_mean
+        n_chunks = -(-len(sel) // MOMENT_CHUNK)
+        chunks += [(c, k_max) for c in np.array_split(sel, n_chunks)] if n_chunks else []
+    for sel, k_max in chunks:
         if not len(sel):
             continue
         k_top = min(k_max, n_pulses)
@@ -183,9 +189,11 @@ def coates_bin_moments(n_pulses: int, alpha: np.ndarray, h: np.ndarray) -> np.nd
             - special.gammaln(n_pulses - k + 1)
         )
         al = alpha[sel]
-        with np.errstate(divide="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore"):
             la, l1a = np.log(al)[:, None], np.log1p(-al)[:, None]
-        logp = log_choose[None, :] + np.where(k > 0, k * la, 0.0) + (n_pulses - k) * l1a
+            hits = np.where(k > 0, k * la, 0.0)  # 0 log 0 = 0
+            misses = np.where(n_pulses - k > 0, (n_pulses - k) * l1a, 0.0)
+        logp = log_choose[None, :] + hits + misses
         p = np.exp(logp)
         # the moments at A = 0 .. k_top + 1 (integers: the table's own rows; A_TABLE >= 61)
         i, wu = _u_index(h[sel])
@@ -257,8 +265,11 @@ def expected_histogram(
     n = len(start_bin)
     k_fine = fine_cells_per_bin(t)
     dt = t.bin_s / k_fine
-    reach = int(np.ceil(4.0 * t.jitter_s / dt))
-    # the fine cells run `reach` before the window to `reach` after it (jitter moves them in)
+    # the fine cells run `reach` before the window to `reach` after it (jitter moves them in);
+    # a jitter much wider than the window is cut at twice the window (or 2048 cells) either
+    # side: what it would carry further is lost from the window anyway (the background it
+    # would bring in from beyond is left out)
+    reach = int(min(np.ceil(4.0 * t.jitter_s / dt), max(2 * n_bins * k_fine, 2048)))
     n_cells = n_bins * k_fine + 2 * reach
     q = np.zeros((n, n_bins))
     alpha = np.zeros((n, n_bins))
@@ -274,8 +285,9 @@ def expected_histogram(
     rate_hz, start_bin = rate_hz[order], start_bin[order]
     armed_at_start = armed_at_start[order]
     dead_bins = int(round(t.dead_time_s / t.bin_s)) if dead_cells < n_cells else n_bins
-    for lo in range(0, n, ROW_BLOCK):
-        sl = slice(lo, lo + ROW_BLOCK)
+    row_block = max(1, BLOCK_VALUES // (n_cells + 1))
+    for lo in range(0, n, row_block):
+        sl = slice(lo, lo + row_block)
         t0 = start_bin[sl, None] * t.bin_s  # window start, from the gate's opening
         te = t0 + x  # (m, n_cells + 1)
         lam = rate_hz[sl, None] * (te - te[:, :1])
@@ -328,9 +340,18 @@ def expected_histogram(
                     recent -= e_t[i - m + 1]
             e = e_t.T
         # jitter: convolve the cells with the Gaussian, keep the window's cells, sum into bins
-        from scipy.ndimage import convolve1d  # noqa: PLC0415
+        if len(kern) <= 129:
+            from scipy.ndimage import convolve1d  # noqa: PLC0415
 
-        ej = convolve1d(e, kern, axis=1, mode="constant")
+            ej = convolve1d(e, kern, axis=1, mode="constant")
+        else:  # a jitter of many cells: by FFT ("same": centred on the cells)
+            size = e.shape[1] + len(kern) - 1
+            n_fft = 1 << int(np.ceil(np.log2(size)))
+            full = np.fft.irfft(
+                np.fft.rfft(e, n_fft, axis=1) * np.fft.rfft(kern, n_fft)[None, :], n_fft, axis=1
+            )
+            off = (len(kern) - 1) // 2
+            ej = np.maximum(full[:, off : off + e.shape[1]], 0.0)
         qb = ej[:, reach : reach + n_bins * k_fine].reshape(len(e), n_bins, k_fine).sum(axis=2)
         q[sl] = qb
         # armed share at bin j: a0 and the re-armed, less the avalanches within the dead time
@@ -494,7 +515,7 @@ def expected_windows(
     last_s = np.where(has, element_t_s, -np.inf).max(axis=1)
     first_s = np.where(np.isfinite(first_s), first_s, 0.0)
     last_s = np.where(np.isfinite(last_s), last_s, first_s)
-    reach = int(np.ceil(4.0 * t.jitter_s / t.bin_s)) + 1
+    reach = int(min(np.ceil(4.0 * t.jitter_s / t.bin_s), 2 * length)) + 1
     margin = pre + width + reach + 2
     span_start = np.floor(first_s / t.bin_s).astype(np.int64) - margin
     echo_bins = int(np.ceil(float(np.max(last_s - first_s, initial=0.0)) / t.bin_s))
@@ -531,7 +552,76 @@ def predict_pixels(
     """The range estimate of each lit pixel as its histogram gives it, from the gate's opening
     [s]: the echo's start (the centroid less 2 s, Eq. 1's mean delay; or the first-photon
     fit's t0, ``correction = "fit"``), and its sd (module docstring; arguments as
-    :func:`expected_windows`; ``min_counts``: each pixel's detection threshold in counts)."""
+    :func:`expected_windows`; ``min_counts``: each pixel's detection threshold in counts).
+    In blocks of pixels of at most BLOCK_VALUES fine cells; a window of more than MAX_BINS bins
+    (TDC bins far finer than the pulse and the jitter) is modelled on bins merged by g to at
+    most MAX_BINS (each merged bin's hazard is then still small, so Coates' estimate of it is
+    the sum of its parts')."""
+    # a jitter far wider than the gate puts the estimator's window start far before the gate
+    # and widens its peak window past it (bins there hold nothing): the model keeps both
+    # within a window length
+    pre, width = min(pre, length), min(width, length)
+    if length > MAX_BINS:
+        g = int(np.ceil(length / MAX_BINS))
+        t = Timing(
+            scale_s=t.scale_s,
+            jitter_s=t.jitter_s,
+            bin_s=t.bin_s * g,
+            dead_time_s=t.dead_time_s,
+            n_pulses=t.n_pulses,
+        )
+        width, pre = max(1, round(width / g)), int(np.ceil(pre / g))
+        length, n_gate_bins = int(np.ceil(length / g)), int(np.ceil(n_gate_bins / g))
+    n = len(rate_hz)
+    min_counts = np.broadcast_to(np.asarray(min_counts, dtype=np.float64), (n,))
+    span = 2 * (pre + width + length) + 16
+    cells = (span + 8 * length) * fine_cells_per_bin(t) + 4096
+    rows = max(1, int(BLOCK_VALUES // max(cells, 1.0)))
+    parts = []
+    for lo in range(0, n, rows):
+        sl = slice(lo, lo + rows)
+        parts.append(
+            _predict_block(
+                t,
+                element_t_s[sl],
+                element_pe[sl],
+                rate_hz[sl],
+                armed_at_start[sl],
+                width,
+                pre,
+                length,
+                n_gate_bins,
+                coates,
+                correction,
+                min_counts[sl],
+            )
+        )
+    if not parts:
+        empty = np.zeros(0)
+        return Prediction(t_s=empty, sd_s=empty, signal_counts=empty, skew=empty)
+    return Prediction(
+        **{
+            f: np.concatenate([getattr(p, f) for p in parts])
+            for f in ("t_s", "sd_s", "signal_counts", "skew")
+        }
+    )
+
+
+def _predict_block(
+    t,
+    element_t_s,
+    element_pe,
+    rate_hz,
+    armed_at_start,
+    width,
+    pre,
+    length,
+    n_gate_bins,
+    coates,
+    correction,
+    min_counts,
+) -> Prediction:
+    """:func:`predict_pixels` for one block of pixels."""
     start_bin, q, alpha = expected_windows(
         t, element_t_s, element_pe, rate_hz, armed_at_start, width, pre, length, n_gate_bins
     )
@@ -620,6 +710,8 @@ def first_events_histogram(events, pixel, start_bin, length, n_pulses, dead_bins
     """(q, length) first avalanche of each pulse in each pixel's window [start, start + length)
     and (q,) the pulses armed when it opens (no avalanche within the dead time before it)."""
     q = len(pixel)
+    if q == 0:
+        return np.zeros((0, length)), np.zeros(0)
     n_all = int(max(int(events.pixel.max()) + 1 if len(events) else 0, int(pixel.max()) + 1))
     row_of = np.full(n_all, -1, dtype=np.int64)
     row_of[pixel] = np.arange(q)

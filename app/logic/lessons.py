@@ -275,8 +275,8 @@ LESSONS: tuple[Lesson, ...] = (
         color_by="outlier",
         look=(
             "The point cloud coloured by outlier flag: at TNR {tnr:g} the {gate_m:,.0f} m range "
-            "gate fills with {out4:,} false points, and {drop4:,} of the {n_lit:,} pixels that "
-            "see the target give no point. The selected pixel's echo peaks at SNR "
+            "gate fills with {out4:,} false points, and {drop4:,} of the {n_lit:,} pixels with "
+            "an echo give no point. The selected pixel's echo peaks at SNR "
             "{snr_px:.1f}; the dash-dot line is the threshold."
         ),
         why=(

@@ -31,6 +31,7 @@ def stats_rows(summary: dict) -> list[dict]:
             "label": "Pixels seeing the target",
             "value": f"{summary['n_hit_pixels']:,d} of {summary['n_pixels']:,d}",
         },
+        {"label": "Pixels with an echo (lit)", "value": fmt(summary.get("n_lit_pixels"), ",d")},
         {"label": "Mean detection probability", "value": fmt(summary["p_detect_mean"], ".3f")},
         {"label": _snr_label(summary), "value": fmt(summary["snr_median"], ".3g")},
         {

@@ -34,6 +34,8 @@ def test_a_likely_echo_missed_is_said_to_be_missed_by_chance(app):
     by_chance = ~np.asarray(d.detected) & (np.asarray(d.p_detect) >= 0.5)
     assert by_chance.any()
     assert stat(app, "Missed by chance (P_d ≥ 0.5)") == f"{int(by_chance.sum()):,d}"
+    # the cards' "pixels with an echo" has a row of its own
+    assert stat(app, "Pixels with an echo (lit)") == f"{len(result.echo.pixel):,d}"
     labels = [row["label"] for row in app.state.stats]
     chance_at = labels.index("Missed by chance (P_d ≥ 0.5)")
     assert chance_at == labels.index("Dropped pixels (missed)") + 1

@@ -594,7 +594,7 @@ def predicted_range_m(
     ``gm.pileup_correction``); ``min_counts``: the lit pixels' thresholds in counts."""
     gm = scene.gm
     if len(echo.pixel) == 0:
-        return np.zeros(0), np.zeros(0)
+        return np.zeros(0), np.zeros(0), np.zeros(0)
     t_lo = rx.gate_start_s
     pe_per_weight = gm.pde * frame_pulse_energy_j(scene) / photon_energy_j(scene.laser.wavelength_m)
     element_pe = pe_per_weight * np.asarray(echo.weights)

@@ -163,3 +163,15 @@ def test_simulate_prints_the_pile_up_warning_and_compare_calls_the_bias_bias(
     # piled up: the error is a bias several times its spread, as predicted
     assert gm.range_bias_m < -0.3 and abs(gm.range_bias_m) > 5 * gm.range_sd_m
     assert abs(gm.predicted_bias_m - gm.range_bias_m) < 0.1 * abs(gm.range_bias_m)
+
+
+def test_a_frame_without_lit_pixels_has_no_geiger_mode_figures():
+    # 16 x 16 pixels at 10 km: the target falls between the pixels' rays
+    scene = simcore.with_overrides(
+        simcore.Scene(), {"receiver.kind": "gm_apd", "pixels": 16, "distance_m": 10_000.0}
+    )
+    s = simcore.simulate(scene).summary()
+    assert s["n_lit_pixels"] == 0
+    assert s["gm.range_bias_m"] is None and s["gm.range_sigma_m"] is None
+    assert s["gm.saturated_pixel_fraction"] == 0.0
+    assert not [line for line in s["warnings"] if "piled up" in line]

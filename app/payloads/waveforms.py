@@ -69,6 +69,7 @@ def toggle_pixel(selection: list, pixel: list[int], add: bool, limit: int) -> li
     return (current + [pixel])[-limit:]
 
 
+OWN_AXIS_SHARE = 0.05  # a background level under this share of the echo's peak gets its own axis
 MAX_CHART_POINTS = 400  # per trace: more is invisible at chart size and costs transfer time
 
 
@@ -179,6 +180,7 @@ def waveform_figure(result: simcore.Result, selection: list) -> dict:
         if t_det is not None:
             shapes.append(vline(t_det, color))
     times = [t for w in waves for t in (w.t_s[:1].tolist() + w.t_s[-1:].tolist())]
+    right_axis = None  # the background's own axis, when it needs one
     if math.isfinite(threshold_w) and times:
         data.append(
             {
@@ -191,7 +193,17 @@ def waveform_figure(result: simcore.Result, selection: list) -> dict:
                 "hovertemplate": "%{y:.4g}<extra>threshold</extra>",
             }
         )
-        data += _background_traces(waves, result.scene.timing.tnr, times, scale)
+        background = _background_traces(waves, result.scene.timing.tnr, times, scale)
+        level = max((max(abs(y) for y in t["y"]) for t in background), default=0.0)
+        if background and level < OWN_AXIS_SHARE * peak / scale:
+            # a steady level and a noise band too small to see on the echo's axis: their own
+            bg_scale, bg_prefix = encode.si_prefix(level * scale)
+            for trace in background:
+                trace["y"] = [y * scale / bg_scale for y in trace["y"]]
+                trace["yaxis"] = "y2"
+                trace["name"] += " (right axis)"
+            right_axis = f"background, noise ({bg_prefix}W, right axis)"
+        data += background
     if not waves:
         annotations.append(note("Click a pixel of the detector array to see its echo"))
     elif not any(len(w.t_s) for w in waves):
@@ -212,6 +224,17 @@ def waveform_figure(result: simcore.Result, selection: list) -> dict:
         hovermode="closest",
     )
     layout["margin"]["t"] = 10 + 18 * math.ceil(len(data) and len(waves) / 2)
+    if right_axis:
+        layout["yaxis2"] = {
+            "title": {"text": right_axis, "font": {"color": "#ef6c00"}},
+            "overlaying": "y",
+            "side": "right",
+            "showgrid": False,
+            "zeroline": False,
+            "ticks": "outside",
+            "tickfont": {"color": "#ef6c00"},
+        }
+        layout["margin"]["r"] = 60
     layout["xaxis"]["tickformat"] = ",.0f"
     layout["xaxis"]["hoverformat"] = ",.2f"
     if times:
@@ -227,7 +250,8 @@ VIEW_TEXT = {
         "waveform_title": "Echo waveforms of the selected pixels",
         "waveform_caption": "solid: received (band-limited) · dotted: unfiltered · dashed: "
         "emitted pulse delayed by 2R/c · ◆ half-maximum time · vertical line: detected range · "
-        "dash-dot: threshold (TNR × σn)",
+        "dash-dot: threshold (TNR × σn) · by day, orange: the background and the noise band "
+        "(on a right-hand axis when too small to see beside the echo)",
         "snr_caption": "SNR of the pixels with an echo (one flash; the red line: TNR)",
     },
     "gm_apd": {

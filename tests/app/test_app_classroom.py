@@ -68,3 +68,29 @@ def test_every_lessons_reference_opens_its_section_of_the_physics_page(app):
         app.logic.physics.open(bad)
         assert app.state.physics_section is None
         assert app.state.input_message == "Physics page: no such section"
+
+
+def test_a_background_too_small_to_see_beside_the_echo_gets_its_own_axis(app):
+    change(app, sun_mode="manual", sun_elevation_deg=90.0, filter_width_nm=100.0)
+    change(app, pulse_energy_mj=5.0, tnr=5.0)
+    result = app.logic.last_frame.result
+    power = result.background.power_w
+    row, col = (int(i) for i in np.unravel_index(np.argmax(power), power.shape))
+    app.logic.on_pixel_click(row, col)
+    figure = app.state.waveforms
+    traces = {t["name"].split(" ")[0]: t for t in figure["data"]}
+    level, band = traces["background"], traces["noise"]
+    echo_peak = max(
+        max(t["y"])
+        for t in figure["data"]
+        if t.get("mode") == "lines"
+        and "x" in t
+        and t.get("yaxis") is None
+        and t["y"]
+        and t["y"][0] is not None
+    )
+    assert level["yaxis"] == band["yaxis"] == "y2" and "right axis" in level["name"]
+    assert "right axis" in figure["layout"]["yaxis2"]["title"]["text"]
+    # on its own axis the level is a readable number of its unit, not a sliver of the echo's
+    assert 1.0 <= max(level["y"]) < 1000.0 and echo_peak > 0
+    change(app, sun_mode="none")

@@ -332,7 +332,26 @@ def threshold_counts(mu_window, n_windows: float, p_fa: float) -> np.ndarray:
         from scipy import stats  # noqa: PLC0415
 
         k[pos] = stats.poisson.isf(q, uniq[pos]) + 1.0
+        lost = pos & ~np.isfinite(k)  # a q far below what the survival function resolves
+        if lost.any():
+            k[lost] = _tail_count(uniq[lost], q)
     return np.maximum(k, 1.0)[inverse].reshape(mu.shape)
+
+
+def _tail_count(mu, q: float) -> np.ndarray:
+    """(m,) the least k with P(Poisson(mu) >= k) <= q from the log of its first term, where
+    ``stats.poisson.isf`` cannot resolve q (TNR 30: q ~ 1e-200): P(N >= k) <= P(N = k) / (1 -
+    mu / (k + 1)) for k + 1 > mu, so the k found is the exact one or one above it."""
+    log_q = np.log(max(q, np.finfo(float).tiny))
+    mu = np.asarray(mu, dtype=np.float64)
+    k = np.maximum(np.ceil(mu), 1.0)
+    for _ in range(100_000):  # a few hundred steps even for q at the float's limit
+        log_tail = k * np.log(mu) - mu - special.gammaln(k + 1.0) - np.log1p(-mu / (k + 1.0))
+        high = log_tail > log_q
+        if not high.any():
+            break
+        k = np.where(high, k + 1.0, k)
+    return k
 
 
 def _expected_window_counts(scene: Scene, echo: EchoStage, signal_pe, rate_lit_hz):

@@ -289,3 +289,19 @@ def test_afterpulsing_and_crosstalk_add_their_own_events():
     n_ct = int((ct.kind == ev.EVENT_CROSSTALK).sum())
     # p_ct per avalanche, less the edge pixels' missing neighbours and dead neighbours
     assert 0.07 * len(plain) < n_ct < 0.1 * len(plain) + 4 * math.sqrt(n_ct)
+
+
+def test_the_threshold_count_holds_at_a_tnr_beyond_the_survival_functions_reach():
+    """TNR 30 asks for a false-alarm probability of 1e-198 a frame: scipy's Poisson isf gives NaN
+    below about 1e-30, the tail bound the exact count or one above it (checked where isf
+    resolves)."""
+    from scipy import stats
+
+    from simcore.receivers.gm_apd import _tail_count, false_alarm_probability, threshold_counts
+
+    k = threshold_counts(np.array([1e-9, 0.01, 2.0]), 100.0, false_alarm_probability(30.0))
+    assert np.all(np.isfinite(k)) and np.all(np.diff(k) > 0)
+    for mu in np.geomspace(1e-9, 50.0, 25):
+        for q in (1e-3, 1e-8, 1e-16):
+            exact = stats.poisson.isf(q, mu) + 1.0
+            assert exact <= _tail_count(np.array([mu]), q)[0] <= exact + 1.0

@@ -125,8 +125,9 @@ def gross_errors(
     step, CFD (delay, fraction), threshold, timing resolution and re-arm hold-off (module
     docstring); cached in memory and on disk (a corrupt entry is rebuilt, an unwritable cache
     skipped, each with a warning)."""
-    args = (receiver, tau_s, a, bandwidth_hz, dt_s, t_d_s, cfd_fraction, tnr, resolution_s)
-    args = (*args, holdoff_s)
+    args = (
+        receiver, tau_s, a, bandwidth_hz, dt_s, t_d_s, cfd_fraction, tnr, resolution_s, holdoff_s,
+    )  # fmt: skip
     folder = cache_dir()
     try:
         file = _entry(folder, args) if folder is not None else None

@@ -36,8 +36,7 @@ def test_a_manual_sun_lights_the_target_without_a_new_ray_cast(app):
         n.startswith("noise ±σn") for n in names
     )
     assert (
-        "sun.mode=manual" in app.state.share_query
-        and "sun.azimuth_deg=20" in app.state.share_query
+        "sun.mode=manual" in app.state.share_query and "sun.azimuth_deg=20" in app.state.share_query
     )
 
 

@@ -5,8 +5,8 @@ outliers apart, the array image is n x n, the waveform chart shows what the issu
 from __future__ import annotations
 
 import io
-import time
 import math
+import time
 
 import msgpack
 import numpy as np

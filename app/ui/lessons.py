@@ -73,9 +73,22 @@ window.trame.utils.lmapdLesson = {
     const state = window.trame.state;
     if (!lesson) { this.pending = null; return; }
     if (window.innerWidth < 960) state.set('main_drawer', false);
+    if (lesson.view_selector === '.array-card') this.zoomTo(state.get('selected_pixels'));
     state.set('lesson_folded', window.innerHeight < 1000);
     this.pending = { selector: lesson.view_selector, until: performance.now() + 30000 };
     setTimeout(() => this.show(), 350);  // after the drawer's and the card's transitions
+  },
+  zoomTo(pixels) {  // the array image zoomed (at most 4x) about the lesson's pixels
+    const n = (window.trame.state.get('array_image') || {}).pixels;
+    if (!n || !pixels || !pixels.length) return;
+    const rows = pixels.map((p) => p[0]), cols = pixels.map((p) => p[1]);
+    const extent = Math.max(Math.max(...rows) - Math.min(...rows),
+      Math.max(...cols) - Math.min(...cols)) + n / 8;
+    const s = Math.min(4, Math.max(1, n / extent)), m = 1 - 1 / s;
+    const u = (Math.max(...cols) + Math.min(...cols) + 1) / 2 / n;
+    const v = (Math.max(...rows) + Math.min(...rows) + 1) / 2 / n;
+    const clamp = (a) => Math.min(m, Math.max(0, a));
+    window.trame.state.set('array_zoom', { s, x: clamp(u - 0.5 / s), y: clamp(v - 0.5 / s) });
   },
   frame() {
     if (this.pending && performance.now() < this.pending.until) setTimeout(() => this.show(), 50);

@@ -23,7 +23,13 @@ sample, first-stop readout, n_dropped over lit pixels, the Monte Carlo's bias re
 summary's receiver.kind; with the old forms selected the old outputs are reproduced
 (tests/core/test_stops.py). They took this form (column sums beside the hashes, the platform)
 on 2026-11-25, from unchanged code: its summaries agreed with the previous golden ones within RTOL
-and every count exactly.
+and every count exactly. Written again on 2026-11-26 for new figures and columns: every existing
+column of every cloud and every summary figure agreed with the previous fingerprints within RTOL
+(point positions unchanged), but for the changes meant: the MRO's credit ("Courtesy
+NASA/JPL-Caltech"), n_false_expected now the false points expected in the cloud (the crossings
+it was are n_false_crossings_expected), and the oblique case's x column moved 3 mm in sum by the
+statistical model's gross errors at low SNR (docs/physics.md#gross-errors); the new ones are
+the ground truth's columns and the summary's quality, false-points and gm.* keys.
 
 Regenerate only for a change that is meant to alter results, and say so in its commit:
 

@@ -46,6 +46,7 @@ __all__ = [
     "DEFAULT_INTERVAL_S",
     "FlyaroundResult",
     "frame_filename",
+    "pose_series",
     "run_flyaround",
 ]
 
@@ -248,6 +249,15 @@ def _osculating(scene: Scene, which: str) -> Elements:
 
     r, v = satellite_states(scene, which, [0.0])
     return orbit.state_to_elements(r[0], v[0])
+
+
+def pose_series(scene: Scene, times_s: ArrayLike, j2: bool = False) -> RelativePose:
+    """The relative pose of the fly-around at ``times_s`` [s]: the scene's TLEs (SGP4) if it
+    has them, else the paper's orbits (Table 3), as :func:`run_flyaround` images them."""
+    target, imaging = PAPER_TARGET, PAPER_IMAGING
+    if scene.orbit.target_tle:
+        target, imaging = (_osculating(scene, which) for which in ("target", "imaging"))
+    return _pose_series(scene, target, imaging, times_s, j2)
 
 
 def _pose_series(scene: Scene, target: Elements, imaging: Elements, t_s, j2: bool):

@@ -258,7 +258,7 @@ def study_from_dict(
         with_overrides(base, fixed)
     except SceneError as exc:
         raise StudyError(f"{where} [set]: {exc}") from None
-    envelope = _envelope(_table(data, "envelope", where), where)
+    envelope = _envelope(_table(data, "envelope", where), where, with_overrides(base, fixed))
     variables = tuple(
         _variable(k, v, base, where) for k, v in _table(data, "variables", where).items()
     )
@@ -352,11 +352,15 @@ def _values(value, key: str, where: str) -> list:
     return values
 
 
-def _envelope(table: Mapping[str, Any], where: str) -> tuple[dict[str, Any], ...]:
-    """Every envelope point as scene overrides: the product of the lists, then the points."""
+def _envelope(table: Mapping[str, Any], where: str, scene: Scene) -> tuple[dict[str, Any], ...]:
+    """Every envelope point as scene overrides: the product of the lists (the fly-around's
+    frames one of them), then the points."""
     axes: list[list[dict[str, Any]]] = []
     for key, value in table.items():
         if key == "points":
+            continue
+        if key == "flyaround":
+            axes.append(_flyaround_points(value, scene, where))
             continue
         if key in ENVELOPE_LISTS:
             entries = _values(value, key, where)
@@ -388,6 +392,36 @@ def _envelope(table: Mapping[str, Any], where: str) -> tuple[dict[str, Any], ...
             "each trial runs them all: take fewer values"
         )
     return tuple(points)
+
+
+def _flyaround_points(spec, scene: Scene, where: str) -> list[dict[str, Any]]:
+    """``[envelope.flyaround]`` (``times_s``: a list or {start, stop, num} [s] since the orbits'
+    epoch; ``j2``): one point per time, the relative pose and range of the imaging satellite's
+    lidar to the target along the orbits (the paper's Table 3 elements, or the scene's TLEs:
+    ``orbit.target_tle``, ``orbit.imaging_tle``), as ``lmapd flyaround`` images them."""
+    from .. import orbit  # noqa: PLC0415  (only for a fly-around envelope)
+    from ..flyaround import pose_series  # noqa: PLC0415
+
+    if not isinstance(spec, Mapping) or "times_s" not in spec or set(spec) - {"times_s", "j2"}:
+        raise StudyError(
+            f"{where} [envelope.flyaround]: give times_s = [...] (or {{start, stop, num}}) [s] "
+            "and optionally j2 = true"
+        )
+    times = [float(t) for t in _values(spec["times_s"], "flyaround.times_s", where)]
+    j2 = bool(spec.get("j2", False))
+    try:
+        pose = pose_series(scene, times, j2=j2)
+    except (orbit.OrbitError, SceneError, ValueError) as exc:
+        raise StudyError(f"{where} [envelope.flyaround]: {exc}") from None
+    return [
+        {
+            "pose.quaternion_wxyz": [float(v) for v in pose.quaternion_wxyz[i]],
+            "pose.distance_m": float(pose.distance_m[i]),
+            "orbit.time_s": float(pose.t_s[i]),
+            "orbit.j2": j2,
+        }
+        for i in range(len(pose.t_s))
+    ]
 
 
 def field_metadata(key: str) -> dict[str, Any]:

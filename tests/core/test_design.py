@@ -263,3 +263,22 @@ def test_a_study_runs_on_dask_workers_each_envelope_point_on_its_own_worker(tmp_
     assert all(r.error is None for r in screens)
     # each point's worker keeps its pipeline: the later designs reuse its ray cast
     assert result.tally.reused["hits"] >= 2 * (2 - 1)
+
+
+def test_a_fly_around_envelope_holds_the_poses_lmapd_flyaround_images():
+    from simcore.flyaround import run_flyaround
+
+    spec = {
+        **SMALL,
+        "envelope": {"flyaround": {"times_s": [0.0, 300.0, 600.0]}, "seed": [1, 2]},
+    }
+    study = design.study_from_dict(spec)
+    assert len(study.envelope) == 6  # 3 frames x 2 seeds
+    small = simcore.with_overrides(simcore.Scene(), {"pixels": 16})
+    fly = run_flyaround(small, [0.0, 300.0, 600.0], progress=False)
+    for record, point in zip(fly.records, study.envelope[::2], strict=True):
+        assert point["pose.distance_m"] == record["distance_m"]
+        assert point["pose.quaternion_wxyz"] == record["quaternion_wxyz"]
+        assert point["orbit.time_s"] == record["t_s"]
+    with pytest.raises(design.StudyError, match="envelope.flyaround"):
+        design.study_from_dict({**SMALL, "envelope": {"flyaround": {"every_s": 300}}})

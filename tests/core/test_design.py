@@ -134,8 +134,15 @@ def screened(result) -> list[dict]:
     return [r.params for r in result.records if r.stage == "screen"]
 
 
-def test_the_same_study_and_seed_screen_the_same_designs(tmp_path):
-    a = design.run(design.study_from_dict(SMALL), tmp_path / "a", workers=0, progress=False)
+@pytest.fixture(scope="module")
+def small(tmp_path_factory):
+    """SMALL run once, uninterrupted, into its folder (several tests read it)."""
+    out = tmp_path_factory.mktemp("small") / "out"
+    return design.run(design.study_from_dict(SMALL), out, workers=0, progress=False), out
+
+
+def test_the_same_study_and_seed_screen_the_same_designs(tmp_path, small):
+    a = small[0]
     b = design.run(design.study_from_dict(SMALL), tmp_path / "b", workers=0, progress=False)
     assert screened(a) == screened(b) and len(screened(a)) == 6
     other = design.run(
@@ -144,7 +151,7 @@ def test_the_same_study_and_seed_screen_the_same_designs(tmp_path):
     assert screened(other) != screened(a)
 
 
-def test_an_interrupted_study_keeps_every_finished_design_and_resumes(tmp_path, monkeypatch):
+def test_an_interrupted_study_keeps_every_finished_design_and_resumes(tmp_path, monkeypatch, small):
     study = design.study_from_dict(SMALL)
     out = tmp_path / "out"
     calls = {"n": 0}
@@ -168,17 +175,15 @@ def test_an_interrupted_study_keeps_every_finished_design_and_resumes(tmp_path, 
     resumed = design.run(study, out, workers=0, progress=False, resume=True)
     assert screened(resumed)[:4] == first and len(screened(resumed)) == 6
     # the same designs as a study never interrupted
-    whole = design.run(study, tmp_path / "whole", workers=0, progress=False)
-    assert screened(resumed) == screened(whole)
+    assert screened(resumed) == screened(small[0])
     assert resumed.n_reused == 0 and resumed.n_run == 6 - 4 + len(resumed.records) - 6
     changed = design.study_from_dict({**SMALL, "seed": 99})
     with pytest.raises(design.StudyError, match="another study"):
         design.run(changed, out, workers=0, progress=False, resume=True)
 
 
-def test_a_study_writes_its_table_front_best_scene_figures_and_report(tmp_path):
-    out = tmp_path / "out"
-    result = design.run(design.study_from_dict(SMALL), out, workers=0, progress=False)
+def test_a_study_writes_its_table_front_best_scene_figures_and_report(small):
+    result, out = small
     table = pq.read_table(out / "trials.parquet")
     assert table.num_rows == sum(len(r.points) for r in result.records)
     assert {"quality.precision", "n_outliers", "var.timing.tnr", "env.pose.distance_m"} <= set(

@@ -39,6 +39,7 @@ from .report import (
 from .search import (
     Record,
     SearchState,
+    _key,
     cheapest,
     confirm,
     load_records,
@@ -154,7 +155,7 @@ def run(
     if _is_toml(study.text):  # the study, for open_study and the app
         (out / STUDY_COPY).write_text(study.text)
     state = SearchState(next_number=1 + max((r.number for r in previous), default=-1))
-    cache = {f"{r.preset} {_json(r.params)}": r for r in previous if r.stage != "screen"}
+    cache = {_key(r.preset, r.params): r for r in previous if r.stage != "screen"}
     bar = tqdm(total=n_trials, desc=f"design {study.name}", unit="trial", disable=not progress)
     try:
         with _Executor(range(n_trials), workers, scheduler, client, 30.0) as submit:
@@ -229,12 +230,6 @@ def _is_toml(text: str) -> bool:
     return bool(text)
 
 
-def _json(params) -> str:
-    import json  # noqa: PLC0415
-
-    return json.dumps(params, sort_keys=True)
-
-
 def _previous(study: Study, out: Path, resume: bool) -> list[Record]:
     if out.exists() and not out.is_dir():
         raise StudyError(f"--out {out} is a file; give a folder")
@@ -263,7 +258,7 @@ def _front(study: Study, candidates: list[Record]) -> list[Record]:
     ok = sorted((r for r in candidates if r.feasible), key=lambda r: (r.objectives[0], r.number))
     unique: dict[str, Record] = {}
     for r in ok:
-        unique.setdefault(_json(r.params), r)
+        unique.setdefault(_key("", r.params), r)
     return list(unique.values())[: max(1, study.confirm)]
 
 

@@ -23,7 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .orbit import PAPER_IMAGING, PAPER_TARGET, R_EARTH_M, lvlh_attitude, propagate
+from .orbit.attitude import lvlh_attitude
+from .orbit.elements import PAPER_IMAGING, PAPER_TARGET, R_EARTH_M
+from .orbit.propagation import propagate
 from .scene import Scene, SceneError, parse_utc, tle_lines
 
 AU_M = 149_597_870_700.0  # [m] the astronomical unit (IAU 2012 Resolution B2, exact)

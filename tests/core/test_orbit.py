@@ -620,16 +620,29 @@ def test_distance_stats_rejects_a_bad_sample_count(n):
         distance_stats(PAPER_TARGET, PAPER_IMAGING, n=n)
 
 
-def test_the_module_imports_only_numpy_scipy_and_the_standard_library():
+def test_the_orbit_modules_import_only_numpy_scipy_the_standard_library_and_each_other():
+    """Every module of the orbits package: numpy, scipy, the standard library's dataclasses and
+    math, and its own modules (the package's lazy exports: importlib and typing)."""
     import ast
-    import inspect
+    from pathlib import Path
 
-    tree = ast.parse(inspect.getsource(orbit))
-    roots = {
-        alias.name.split(".")[0]
-        for n in ast.walk(tree)
-        if isinstance(n, ast.Import)
-        for alias in n.names
-    }
-    roots |= {n.module.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
-    assert roots <= {"__future__", "dataclasses", "math", "numpy", "scipy"}
+    allowed = {"__future__", "dataclasses", "math", "numpy", "scipy"}
+    extra = {"__init__": {"importlib", "typing"}}
+    files = sorted(Path(orbit.__file__).parent.glob("*.py"))
+    assert {f.stem for f in files} >= {"__init__", "elements", "propagation", "attitude"}
+    for path in files:
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        roots = {
+            alias.name.split(".")[0]
+            for n in ast.walk(tree)
+            if isinstance(n, ast.Import)
+            for alias in n.names
+        }
+        roots |= {
+            n.module.split(".")[0]
+            for n in ast.walk(tree)
+            if isinstance(n, ast.ImportFrom) and n.level == 0 and n.module
+        }
+        assert roots <= allowed | extra.get(path.stem, set()), path.name
+        outside = [n.level for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.level > 1]
+        assert outside == [], path.name

@@ -17,10 +17,9 @@ import math
 import numpy as np
 
 import simcore
-from simcore import montecarlo
-from simcore import receiver as apd
 from simcore.constants import C, H
-from simcore.montecarlo.photon import PhotonNoise
+from simcore.receivers.lm_apd import apd, montecarlo
+from simcore.receivers.lm_apd.montecarlo.photon import PhotonNoise
 
 QUIET = {"detector.gain_from": "gain", "detector.gain": 100.0, "detector.load_ohm": 1e5}
 PE = (1, 3, 10, 30, 100)

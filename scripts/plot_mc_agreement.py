@@ -27,7 +27,8 @@ import numpy as np
 from scipy import constants as sc
 from support.mc_scene import DT, K_ATT, RX, RX_THERMAL, SCENE, SHAPE, T_D, T_T, B, E
 
-from simcore import detection, echo, montecarlo, timing
+from simcore import echo
+from simcore.receivers.lm_apd import detection, montecarlo, timing
 
 C = sc.c
 

@@ -25,10 +25,11 @@ except ImportError as exc:  # pragma: no cover - depends on the installation
         "ray caster is far too slow for flash-lidar frames"
     ) from exc
 
-from . import parallel, timing
+from . import parallel
 from .constants import C
 from .illumination import illumination_gain
 from .pulse import scene_pulse_shape
+from .receivers.lm_apd import timing
 from .scene import Pose, Scene
 from .stage import Stage, readonly
 from .target import TargetModel, load_target, source_stamp

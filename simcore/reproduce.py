@@ -20,10 +20,11 @@ from typing import Any
 import numpy as np
 from scipy import signal
 
-from . import echo, orbit, timing
+from . import echo, orbit
 from .constants import C
 from .materials import MATERIAL_NAMES
 from .pipeline import Result
+from .receivers.lm_apd import timing
 
 __all__ = [
     "CONVENTION_COLUMNS",

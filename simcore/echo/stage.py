@@ -9,9 +9,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import geometry, materials, timing
+from .. import geometry, materials
 from ..constants import C
 from ..pulse import PulseShape, default_time_step_s, scene_pulse_shape
+from ..receivers.lm_apd import timing
 from ..scene import Scene
 from ..stage import Stage, readonly
 from ..target import TargetModel, with_materials

@@ -29,16 +29,16 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..detection import Outliers
 from ..scene import DEFAULT_RECEIVER, RECEIVER_KINDS, Scene, receiver_kinds
 from ..stage import Stage, readonly
+from .lm_apd.detection import Outliers
 
 if TYPE_CHECKING:
     from ..background import Background
     from ..echo import EchoStage
 
 # kind -> the module that registers it when imported
-BUILT_IN = {"lm_apd": "simcore.receivers.lm_apd", "gm_apd": "simcore.receivers.gm_apd"}
+BUILT_IN = {"lm_apd": "simcore.receivers.lm_apd.receiver", "gm_apd": "simcore.receivers.gm_apd"}
 DEFAULT_KIND = DEFAULT_RECEIVER
 _REGISTERED: dict[str, Receiver] = {}
 

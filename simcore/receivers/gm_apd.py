@@ -30,7 +30,6 @@ import numpy as np
 from scipy import special
 
 from ..constants import C, H
-from ..detection import Outliers
 from ..echo import EchoStage
 from ..scene import Scene, SceneError
 from . import Detection, Receiver, Response, register
@@ -38,6 +37,7 @@ from . import gm_events as ev
 from . import gm_histogram as gh
 from . import gm_pileup as gp
 from .gm_limits import BYTES_PER_EVENT, MAX_EVENTS, armed_probability
+from .lm_apd.detection import Outliers
 
 MAX_EVENTS_PER_PULSE = 10_000  # expected avalanches of one pixel in one gate at most
 ECHO_TAIL_SCALES = 12.0  # the analysis window runs 12 s past the echo (Gamma(2) tail 8e-5)

@@ -341,7 +341,7 @@ def test_an_exception_inside_a_pipeline_stage_keeps_the_last_good_result(app, mo
     def broken(*args, **kwargs):
         raise FloatingPointError("receiver blew up")
 
-    monkeypatch.setattr(simcore.receiver, "receiver_model", broken)
+    monkeypatch.setattr(simcore.receivers.lm_apd.apd, "receiver_model", broken)
     change(app, pulse_energy_mj=1.5)
     s = app.state
     assert s.error_message.startswith("Simulation failed (FloatingPointError): receiver blew up")

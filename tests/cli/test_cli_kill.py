@@ -26,7 +26,7 @@ PRELOAD = [
     "simcore.pipeline",
     "simcore.io",
     "simcore.echo.kernel",
-    "simcore.receivers.lm_apd",
+    "simcore.receivers.lm_apd.receiver",
     "simcore.gross_errors",
 ]
 WAIT_S = 120.0

@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 
 import simcore
-from simcore import receiver
 from simcore.cli import CliError
 from simcore.cli.reproduce import add_parser, run_cli
 from simcore.cli.reproduce.report import ITEMS, REPORT_NAME, run_reproduction
+from simcore.receivers.lm_apd import apd as receiver
 
 pytestmark = pytest.mark.slow  # two quick runs, ~8 s each
 

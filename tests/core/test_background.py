@@ -19,8 +19,9 @@ from scipy import constants as sc
 from support.mc_scene import DT, K_ATT, RX, SCENE, SHAPE, T_D, B, E
 
 import simcore
-from simcore import detection, echo, materials, montecarlo, sun, timing
+from simcore import echo, materials, sun
 from simcore.orbit import R_EARTH_M
+from simcore.receivers.lm_apd import detection, montecarlo, timing
 from simcore.scene import SceneError, with_overrides
 
 C = sc.c

@@ -17,7 +17,7 @@ from scipy import optimize, special
 import simcore
 from simcore import design, echo
 from simcore.design.search import RECORDS_DIR
-from simcore.receiver import receiver_model
+from simcore.receivers.lm_apd.apd import receiver_model
 from simcore.scene import Scene, load_scene, with_overrides
 
 DISTANCE_M = 1000.0

@@ -5,7 +5,7 @@ import pytest
 from scipy import constants as sc
 from scipy import special
 
-from simcore import detection
+from simcore.receivers.lm_apd import detection
 
 
 def test_eq27_reduces_to_the_papers_form_when_thermal_noise_dominates():

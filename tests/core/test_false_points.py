@@ -14,8 +14,8 @@ import pytest
 from scipy import stats
 
 import simcore
-from simcore import detection
 from simcore.receivers import gm_apd
+from simcore.receivers.lm_apd import detection
 
 PIPE = simcore.Pipeline()
 NO_ECHO = (np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0))

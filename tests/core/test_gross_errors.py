@@ -16,10 +16,11 @@ from scipy import constants as sc
 from support.mc_scene import DT, K_ATT, RX, SHAPE, T_D, E
 
 import simcore
-from simcore import background, detection, echo
+from simcore import background, echo
 from simcore import gross_errors as gross
 from simcore.echo import EchoStage
-from simcore.receivers import lm_apd
+from simcore.receivers.lm_apd import detection
+from simcore.receivers.lm_apd import receiver as lm_apd
 
 C = sc.c
 SNRS = (6.0, 19.0, 70.0)

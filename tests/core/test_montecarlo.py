@@ -15,8 +15,9 @@ from scipy import integrate, stats
 from support.mc_scene import DT, K_ATT, RX, RX_THERMAL, SCENE, SHAPE, T_D, T_T, TAU, B, E
 
 import simcore
-from simcore import detection, echo, montecarlo, timing
+from simcore import echo
 from simcore.echo import EchoStage
+from simcore.receivers.lm_apd import detection, montecarlo, timing
 
 C = sc.c
 MAD_SIGMA = 1.4826  # robust sigma = 1.4826 x median absolute deviation (Gaussian)

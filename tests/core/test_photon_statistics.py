@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 import simcore
-from simcore import receiver as apd
-from simcore.montecarlo import photon
+from simcore.receivers.lm_apd import apd
+from simcore.receivers.lm_apd.montecarlo import photon
 
 
 @pytest.mark.parametrize(("gain", "k"), [(73.0, 0.02), (20.0, 0.0), (10.0, 0.3), (150.0, 0.1)])

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 from scipy import constants as sc
 
-from simcore import echo, timing
+from simcore import echo
+from simcore.receivers.lm_apd import timing
 
 TAU = 5e-9
 B = 120e6

@@ -5,7 +5,7 @@ import pytest
 from scipy import constants as sc
 
 import simcore
-from simcore.receiver import (
+from simcore.receivers.lm_apd.apd import (
     excess_noise_factor,
     friis_noise_factor,
     miller_gain,

@@ -343,7 +343,7 @@ class _Terminal(io.StringIO):
 
 def test_a_long_monte_carlo_frame_shows_its_progress_on_a_terminal_only(monkeypatch):
     """The bar appears after PROGRESS_DELAY_S on a terminal (here made 0) and never on a pipe."""
-    from simcore.montecarlo import gate
+    from simcore.receivers.lm_apd.montecarlo import gate
 
     scene = with_overrides(
         Scene(), {"pixels": 16, "fidelity.subrays": 1, "fidelity.noise_model": "montecarlo"}

@@ -15,8 +15,9 @@ from scipy import constants as sc
 from support.mc_scene import DT, K_ATT, RX, SCENE, SHAPE, T_D, TAU, B, E
 
 import simcore
-from simcore import detection, echo, montecarlo, timing
-from simcore.receivers import lm_apd
+from simcore import echo
+from simcore.receivers.lm_apd import detection, montecarlo, timing
+from simcore.receivers.lm_apd import receiver as lm_apd
 
 C = sc.c
 HOLDOFF_S = TAU  # one FWHM of the emitted pulse

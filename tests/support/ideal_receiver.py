@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from simcore import receivers, timing
-from simcore.detection import Outliers
+from simcore import receivers
+from simcore.receivers.lm_apd import timing
+from simcore.receivers.lm_apd.detection import Outliers
 
 KIND = "ideal"
 

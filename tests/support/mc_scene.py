@@ -6,7 +6,9 @@ from __future__ import annotations
 import dataclasses
 
 import simcore
-from simcore import echo, receiver, timing
+from simcore import echo
+from simcore.receivers.lm_apd import apd as receiver
+from simcore.receivers.lm_apd import timing
 
 SCENE = simcore.Scene()
 RX = receiver.receiver_model(SCENE.detector, SCENE.amplifiers, SCENE.laser.wavelength_m)

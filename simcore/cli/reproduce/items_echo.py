@@ -8,8 +8,10 @@ from typing import Any
 
 import numpy as np
 
-from ... import detection, echo, receiver
+from ... import echo
 from ...materials import LIBRARY, MATERIAL_NAMES, material_brdf
+from ...receivers.lm_apd import apd as receiver
+from ...receivers.lm_apd import detection
 from ...reproduce import (
     FIG9_DF_HZ,
     FIG9_GATE_M,
@@ -61,7 +63,7 @@ def item_brdf(run: ReproduceRun) -> dict[str, Any]:
 
 
 def item_detection(run: ReproduceRun) -> dict[str, Any]:
-    from ... import montecarlo  # noqa: PLC0415  (only for this item)
+    from ...receivers.lm_apd import montecarlo  # noqa: PLC0415  (only for this item)
 
     s = run.settings
     scene = run.scene()

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..pulse import A_FWHM, PulseShape
+from ....pulse import A_FWHM, PulseShape
 from .currents import BandLimit
 
 ARMING_REFINE = 8  # between-sample excursions are looked for at dt / 8

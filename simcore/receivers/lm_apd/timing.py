@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .constants import C
-from .pulse import PulseShape
+from ...constants import C
+from ...pulse import PulseShape
 
 
 def cfd_delay_s(shape: PulseShape, delay_s: float = 0.0) -> float:

@@ -16,11 +16,11 @@ from typing import Any
 
 import numpy as np
 
-from ..constants import C
+from ....constants import C
+from ....echo.features import compiled_kernel
+from ....pulse import PulseShape
+from ..apd import ReceiverModel
 from ..detection import Outliers
-from ..echo.features import compiled_kernel
-from ..pulse import PulseShape
-from ..receiver import ReceiverModel
 from .currents import BandLimit, band_limit, noisy_band_limited
 from .discriminator import batches, discriminate, pulse_fwhm_s, raw_end_s, reference_stop_s
 

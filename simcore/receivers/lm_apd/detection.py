@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import special
 
-from .constants import C
+from ...constants import C
 
 
 def detection_probability(i_pk_a, threshold_a: float | np.ndarray, sigma_pk_a):

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..constants import C
-from ..pulse import A_FWHM, PulseShape, default_time_step_s, pulse_shape
-from ..receiver import Q_E, ReceiverModel
+from ....constants import C
+from ....pulse import A_FWHM, PulseShape, default_time_step_s, pulse_shape
+from ..apd import Q_E, ReceiverModel
 from ..timing import cfd_delay_s
 from .discriminator import raw_end_s
 from .gate import McResult, montecarlo_gate

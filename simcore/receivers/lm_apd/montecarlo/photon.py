@@ -29,7 +29,7 @@ from functools import lru_cache
 import numpy as np
 from scipy import special
 
-from ..receiver import Q_E, ReceiverModel
+from ..apd import Q_E, ReceiverModel
 
 EXACT_SUM = 64  # photoelectrons per sample whose gains are summed one by one
 TAIL_MASS = 1e-12  # the table stops where less than this much probability is left

@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .constants import K_B, Q_E, C, H
-from .scene import Amplifiers, Detector, SceneError
+from ...constants import K_B, Q_E, C, H
+from ...scene import Amplifiers, Detector, SceneError
 
 PAPER_QUANTUM_EFFICIENCY = 0.6  # the paper's "about 0.6 for Si"
 MAX_GAIN = 1e6  # refused above: far beyond any linear-mode APD (Si 20-400, Table 2)

@@ -20,13 +20,12 @@ from typing import Any
 
 import numpy as np
 
-from .. import detection, timing
-from .. import receiver as apd
-from ..background import Background
-from ..echo import EchoStage
-from ..pulse import A_FWHM
-from ..scene import Scene, SceneError
-from . import Detection, Receiver, Response, register
+from ...background import Background
+from ...echo import EchoStage
+from ...pulse import A_FWHM
+from ...scene import Scene, SceneError
+from .. import Detection, Receiver, Response, register
+from . import apd, detection, timing
 
 MAX_OUTLIERS = (
     5_000_000  # false alarms per flash at most (K per pixel bounds them; 1024^2 x 16 not)
@@ -186,7 +185,7 @@ def detect(scene: Scene, echo: EchoStage, rx: LmApdResponse) -> LmApdDetection:
     if scene.fidelity.noise_model in ("montecarlo", "photon"):
         # Section 5: noisy waveforms through the discriminator decide detections, ranges and
         # false alarms; P_d and sigma above stay the statistical model's, for comparison
-        from .. import montecarlo  # noqa: PLC0415  (imported only when the MC model is asked for)
+        from . import montecarlo  # noqa: PLC0415  (imported only when the MC model is asked for)
 
         extra: dict[str, Any] = {}
         if rx.background_a is not None:
@@ -238,7 +237,7 @@ def _gross_errors(scene, echo, rx: LmApdResponse, r_true_m, r_meas_m, drawn, hol
     flash do not move. The Monte Carlo's table is computed (and cached) only when a drawn echo
     is in its SNR range."""
     t = scene.timing
-    from .. import gross_errors as gross  # noqa: PLC0415  (only when needed)
+    from ... import gross_errors as gross  # noqa: PLC0415  (only when needed)
 
     in_range = drawn & (rx.snr <= gross.snr_grid(t.tnr + gross.TNR_STEP)[-1])
     if not in_range.any():

@@ -9,8 +9,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import signal
 
-from ..pulse import band_limit_sigma_s
-from ..receiver import Q_E, ReceiverModel
+from ....pulse import band_limit_sigma_s
+from ..apd import Q_E, ReceiverModel
 
 KERNEL_HALF_WIDTH_SIGMA = 6.0  # h_B truncated at +-6 sigma_h: 2e-9 of its area is lost
 
@@ -90,7 +90,7 @@ def noisy_band_limited(
     the caller adds the band-limited signal itself (the gate adds it in closed form).
     ``row_scale`` (n,): each row's signal-free noise over sigma_n (a pixel's background light
     adds its shot noise, 2 q i_bg0 M^2 F F_chain to S: docs/physics.md#background-noise); None: 1.
-    ``photon`` (a :class:`simcore.montecarlo.photon.PhotonNoise`): the shot and bulk dark noise
+    ``photon`` (a :class:`.photon.PhotonNoise`): the shot and bulk dark noise
     drawn photon by photon with McIntyre gains instead (docs/physics.md#mcintyre); a row's
     background shot noise (``row_scale``) is then added as Gaussian noise.
 

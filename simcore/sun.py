@@ -23,10 +23,13 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import SceneError
 from .orbit.attitude import lvlh_attitude
 from .orbit.elements import PAPER_IMAGING, PAPER_TARGET, R_EARTH_M
+from .orbit.epoch import parse_utc
 from .orbit.propagation import propagate
-from .scene import Scene, SceneError, parse_utc, tle_lines
+from .orbit.tle import tle_lines
+from .scene.model import Scene
 
 AU_M = 149_597_870_700.0  # [m] the astronomical unit (IAU 2012 Resolution B2, exact)
 SOLAR_TABLE = Path(__file__).resolve().parent / "data" / "astm_e490_am0_900_1700nm.csv"

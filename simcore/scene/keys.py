@@ -1,0 +1,134 @@
+"""The scene's keys as one dataclass (``SceneKeys``: the sections together, with the quantities
+several stages derive from them) and the key reference (``lmapd keys``, the README's table)."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+from .fields import choices_of, key, range_text, to_plain
+from .presets import PRESETS
+from .sections import (
+    PAPER_FORMS,
+    SECTIONS,
+    Amplifiers,
+    Background,
+    Detector,
+    Fidelity,
+    GeigerMode,
+    Laser,
+    Orbit,
+    Pose,
+    Quality,
+    ReceiveOptics,
+    ReceiverSelection,
+    Sun,
+    Target,
+    Timing,
+    TransmitOptics,
+)
+
+
+@dataclass(frozen=True)
+class SceneKeys:
+    """The scene's top-level keys, its sections and the quantities derived from them, not yet
+    checked: ``Scene`` (``scene.model``) is this class validated on construction. The checks
+    (``scene.validation``) read this class, so that they need not import the Scene they check."""
+
+    name: str = "paper"
+    preset: str = key(
+        "",
+        "-",
+        doc="fidelity preset applied before the other keys: interactive, balanced, "
+        "reference (empty: none)",
+        choices=("", *PRESETS),
+    )
+    seed: int = key(0, "1", 0, 2**63 - 1, "seed of every random draw")
+    conventions: str = key(
+        "ours",
+        "-",
+        doc="ours (docs/physics.md#corrections, default) or paper (all the paper's literal forms)",
+        choices=("ours", "paper"),
+    )
+    paper_forms: tuple[str, ...] = key(
+        (),
+        "-",
+        doc=f"individual paper forms on top of 'ours': {', '.join(PAPER_FORMS)}",
+        choices=PAPER_FORMS,
+    )
+    laser: Laser = field(default_factory=Laser)
+    transmit: TransmitOptics = field(default_factory=TransmitOptics)
+    receive: ReceiveOptics = field(default_factory=ReceiveOptics)
+    detector: Detector = field(default_factory=Detector)
+    amplifiers: Amplifiers = field(default_factory=Amplifiers)
+    timing: Timing = field(default_factory=Timing)
+    target: Target = field(default_factory=Target)
+    pose: Pose = field(default_factory=Pose)
+    fidelity: Fidelity = field(default_factory=Fidelity)
+    receiver: ReceiverSelection = field(default_factory=ReceiverSelection)
+    sun: Sun = field(default_factory=Sun)
+    orbit: Orbit = field(default_factory=Orbit)
+    background: Background = field(default_factory=Background)
+    gm: GeigerMode = field(default_factory=GeigerMode)
+    quality: Quality = field(default_factory=Quality)
+
+    def uses(self, form: str) -> bool:
+        """True if the paper's literal form ``form`` (one of PAPER_FORMS) is in force."""
+        return self.conventions == "paper" or form in self.paper_forms
+
+    # -- derived quantities used by several stages ------------------------------------------------
+    @property
+    def illumination_angle_rad(self) -> float:
+        """Full angle of the illuminated disc: divergence / expansion ratio (Eq. 5)."""
+        return self.laser.divergence_rad / self.transmit.beam_expansion_ratio
+
+    @property
+    def ifov_rad(self) -> float:
+        """Angular size of one pixel (Eq. 23)."""
+        return self.receive.fov_rad / self.detector.pixels
+
+    @property
+    def focal_length_m(self) -> float:
+        """Receiver focal length f_r = D_array / theta_fov (Eq. 22)."""
+        return self.detector.pixels * self.detector.pixel_pitch_m / self.receive.fov_rad
+
+    @property
+    def gate_center_m(self) -> float:
+        return self.timing.gate_center_m or self.pose.distance_m
+
+    def to_dict(self) -> dict[str, Any]:
+        """Every resolved parameter as a plain, JSON- and TOML-ready dict (the receiver section
+        only for a receiver other than the default lm_apd: LM-APD scenes read as before the key
+        existed)."""
+        return to_plain(self)
+
+
+def key_reference() -> list[dict[str, str]]:
+    """One row per scene key: key, unit, default, valid range, doc (for `lmapd keys`, README)."""
+    rows = []
+    for name in ("preset", "seed", "conventions", "paper_forms"):
+        f = next(f for f in dataclasses.fields(SceneKeys) if f.name == name)
+        rows.append(_row(name, f))
+    for section, cls in SECTIONS.items():
+        for f in dataclasses.fields(cls):
+            rows.append(_row(f"{section}.{f.name}", f))
+    return rows
+
+
+def _row(key, f):
+    m = f.metadata
+    if m["choices"] is not None:
+        valid = " / ".join(choices_of(m))
+    elif m["lo"] is not None:
+        valid = range_text(m)
+    else:
+        valid = ""
+    default = f.default
+    return {
+        "key": key,
+        "unit": m["unit"],
+        "default": repr(default) if isinstance(default, str) else str(default),
+        "valid": valid,
+        "doc": m["doc"],
+    }

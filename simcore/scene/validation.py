@@ -1,0 +1,190 @@
+"""The scene's checks: every key against its declared range, and the rules between keys (the
+time step, the Geiger-mode histogram's size, the orbit epoch, the TLEs and the Sun's band); a
+SceneError names the key to change. Run by ``Scene`` on construction."""
+
+from __future__ import annotations
+
+import datetime
+import math
+
+from ..errors import SceneError
+from ..orbit.epoch import EPHEMERIS_FIRST_UTC, EPHEMERIS_LAST_UTC, parse_utc
+from ..orbit.tle import check_tle
+from .fields import check_fields
+from .keys import SceneKeys
+from .sections import SECTIONS
+
+MIN_TIME_STEP_S = 1e-11  # [s] the finest waveform time step (a 256 x 256 frame: ~3 s, ~0.6 GB)
+MAX_SAMPLES_PER_PULSE = 1000  # [-] pulse width / time step at most
+MAX_GATE_SAMPLES = 2**16  # [-] Monte Carlo samples per pixel over the gate (1 km at auto: 16k)
+SPEED_OF_LIGHT_M_S = 299_792_458.0  # [m/s] exact (SI)
+
+
+def auto_time_step_s(scene: SceneKeys) -> float:
+    """The waveform time step of ``fidelity.time_step_s = 0``: min(tau / 10, 1 / (20 B)) [s]
+    (= ``echo.default_time_step_s``, which this module does not import: it loads no numpy)."""
+    return min(scene.laser.pulse_width_s / 10.0, 1.0 / (20.0 * scene.detector.bandwidth_hz))
+
+
+def _check_time_step(scene: SceneKeys) -> None:
+    """fidelity.time_step_s is 0 (auto) or at least MIN_TIME_STEP_S and tau / 1000, and the
+    Monte Carlo model's waveform over the range gate has at most MAX_GATE_SAMPLES samples: no
+    value in range can make the echo windows exhaust memory or time."""
+    dt = scene.fidelity.time_step_s
+    tau = scene.laser.pulse_width_s
+    floor_s = max(MIN_TIME_STEP_S, tau / MAX_SAMPLES_PER_PULSE)
+    if 0.0 < dt < floor_s:
+        raise SceneError(
+            f"fidelity.time_step_s = {dt:g} s is too fine: give 0 (auto) or at least "
+            f"{floor_s:g} s (10 ps, and laser.pulse_width_s / {MAX_SAMPLES_PER_PULSE})"
+        )
+    if scene.fidelity.noise_model not in ("montecarlo", "photon"):
+        return
+    step_s = dt or auto_time_step_s(scene)
+    samples = 2.0 * scene.timing.range_gate_m / SPEED_OF_LIGHT_M_S / step_s
+    if samples > MAX_GATE_SAMPLES:
+        raise SceneError(
+            f"timing.range_gate_m = {scene.timing.range_gate_m:g} m at a time step of "
+            f"{step_s:.3g} s is {samples:.3g} samples per pixel for fidelity.noise_model = "
+            f"{scene.fidelity.noise_model} (at most {MAX_GATE_SAMPLES}): shorten the gate or "
+            "give a coarser fidelity.time_step_s"
+        )
+
+
+# Geiger-mode histogram sizes (simcore/receivers/gm_apd.py): bins are int32 in the event records;
+# each detected pixel's centroid reads a dense analysis window of
+# (s + 4 jitter) + (12 s + 4 jitter) bins (s = tau / 2.446, the pulse's Gamma(2) scale), in
+# blocks of GM_WINDOW_BLOCK_VALUES values (32 MB of float64); over the whole array at most
+# GM_MAX_WINDOW_VALUES values (about 2 GB of float64 passes, seconds on two cores).
+GM_MAX_GATE_BINS = 2**31 - 1
+GM_WINDOW_BLOCK_VALUES = 1 << 22
+GM_MAX_WINDOW_VALUES = 1 << 28
+GM_PULSE_SCALE_OVER_TAU = 1.0 / 2.446386  # s / tau for Eq. 1 with tau the FWHM (the larger s)
+
+
+def gm_analysis_window_bins(scene: SceneKeys) -> float:
+    """Bins of one Geiger-mode pixel's dense analysis window: one pulse scale s and four
+    jitter sigmas before the peak window, twelve s and four sigmas after it (an upper bound of
+    ``gm_apd.detect``'s, clipped to the gate)."""
+    g = scene.gm
+    s = scene.laser.pulse_width_s * GM_PULSE_SCALE_OVER_TAU
+    reach = 4.0 * g.jitter_s
+    window = (s + reach) / g.bin_s + (12.0 * s + reach) / g.bin_s + 3.0  # the ceils
+    return min(window, gm_gate_bins(scene))
+
+
+def gm_gate_bins(scene: SceneKeys) -> float:
+    """TDC bins of the Geiger-mode range gate (a float: it may exceed any integer type)."""
+    lo = max(0.0, scene.gate_center_m - scene.timing.range_gate_m / 2.0)
+    hi = scene.gate_center_m + scene.timing.range_gate_m / 2.0
+    bins = 2.0 * (hi - lo) / SPEED_OF_LIGHT_M_S / scene.gm.bin_s
+    return float(math.ceil(bins)) if math.isfinite(bins) else math.inf
+
+
+def _check_gm_bins(scene: SceneKeys) -> None:
+    """The Geiger-mode gate fits int32 bins and the analysis windows stay within
+    GM_WINDOW_BLOCK_VALUES per pixel and GM_MAX_WINDOW_VALUES over the array: refused before
+    any ray is cast, naming the keys to change."""
+    g = scene.gm
+    n_bins = gm_gate_bins(scene)
+    if n_bins > GM_MAX_GATE_BINS:
+        raise SceneError(
+            f"gm.bin_s = {g.bin_s:g} s splits the gate (timing.range_gate_m = "
+            f"{scene.timing.range_gate_m:g} m) into {n_bins:.3g} bins (at most "
+            f"{GM_MAX_GATE_BINS:,}): give a coarser gm.bin_s or a shorter timing.range_gate_m"
+        )
+    window = gm_analysis_window_bins(scene)
+    total = window * scene.detector.pixels**2
+    if window > GM_WINDOW_BLOCK_VALUES or total > GM_MAX_WINDOW_VALUES:
+        floor_s = g.bin_s * max(window / GM_WINDOW_BLOCK_VALUES, total / GM_MAX_WINDOW_VALUES)
+        raise SceneError(
+            f"gm.bin_s = {g.bin_s:g} s is too fine for gm.jitter_s = {g.jitter_s:g} s and "
+            f"laser.pulse_width_s = {scene.laser.pulse_width_s:g} s: each pixel's analysis "
+            f"window is {window:.3g} bins, {total:.3g} over the {scene.detector.pixels}^2 "
+            f"pixels (at most {GM_WINDOW_BLOCK_VALUES:,} and {GM_MAX_WINDOW_VALUES:,}): give "
+            f"gm.bin_s of at least {floor_s:.2g} s, a smaller gm.jitter_s or fewer "
+            "detector.pixels"
+        )
+
+
+SOLAR_TABLE_M = (900e-9, 1700e-9)
+
+
+def _check_sun(scene: SceneKeys) -> None:
+    """The orbit epoch inside the ephemeris's span, the TLEs parse, and with a Sun the laser
+    line inside the solar table."""
+    o = scene.orbit
+    epoch = parse_utc("orbit.epoch_utc", o.epoch_utc)
+    first = datetime.datetime.fromisoformat(EPHEMERIS_FIRST_UTC)
+    last = datetime.datetime.fromisoformat(EPHEMERIS_LAST_UTC)
+    span = f"the JPL DE421 ephemeris covers {first:%Y-%m-%d} to {last:%Y-%m-%d}"
+    if not first <= epoch <= last:
+        raise SceneError(f"orbit.epoch_utc = {o.epoch_utc!r} is outside the ephemeris: {span}")
+    if o.time_s > (last - epoch).total_seconds():
+        raise SceneError(
+            f"orbit.time_s = {o.time_s:g} s after orbit.epoch_utc = {o.epoch_utc!r} is past the "
+            f"ephemeris: {span}"
+        )
+    if o.imaging_tle and not o.target_tle:
+        raise SceneError("orbit.imaging_tle is given without orbit.target_tle: give both or none")
+    for key in ("orbit.target_tle", "orbit.imaging_tle"):
+        text = getattr(o, key.split(".")[1])
+        if text:
+            check_tle(key, text, epoch + datetime.timedelta(seconds=o.time_s))
+    if scene.sun.mode == "none":
+        return
+    lam, width = scene.laser.wavelength_m, scene.receive.filter_width_m
+    lo, hi = SOLAR_TABLE_M
+    if not (lo <= lam - width / 2 and lam + width / 2 <= hi):
+        raise SceneError(
+            f"laser.wavelength_m = {lam:g} m with receive.filter_width_m = {width:g} m: the "
+            f"solar spectrum this simulator ships (ASTM E-490) covers {lo:g} to {hi:g} m; with "
+            "sun.mode other than none the filter band must lie inside it"
+        )
+
+
+def validate(scene: SceneKeys) -> None:
+    """Check every value and the cross-field rules; raise SceneError naming the key."""
+    check_fields(scene, "", names=("preset", "seed", "conventions", "paper_forms"))
+    for section in SECTIONS:
+        check_fields(getattr(scene, section), f"{section}.")
+    d = scene.detector
+    if d.gain_from == "bias" and d.bias_voltage_v >= d.breakdown_voltage_v:
+        raise SceneError(
+            f"detector.bias_voltage_v = {d.bias_voltage_v:g} V must be below "
+            f"detector.breakdown_voltage_v = {d.breakdown_voltage_v:g} V (Miller's law, Eq. 9)"
+        )
+    t = scene.target
+    if t.size_m > 0 and t.scale_m_per_unit > 0:
+        raise SceneError(
+            f"target.size_m = {t.size_m:g} m and target.scale_m_per_unit = "
+            f"{t.scale_m_per_unit:g} m are both set: give the size or the scale, not both"
+        )
+    fid = scene.fidelity
+    kr = math.isqrt(fid.refine_subrays)
+    if fid.refine_subrays and (kr * kr != fid.refine_subrays or fid.refine_subrays < fid.subrays):
+        raise SceneError(
+            f"fidelity.refine_subrays = {fid.refine_subrays} must be 0 or a square number "
+            f"(4, 16, 64, ...) not below fidelity.subrays = {fid.subrays}"
+        )
+    k = math.isqrt(scene.fidelity.subrays)
+    if k * k != scene.fidelity.subrays:
+        raise SceneError(
+            f"fidelity.subrays = {scene.fidelity.subrays} must be a square number "
+            "(1, 4, 9, 16, ...)"
+        )
+    _check_time_step(scene)
+    a = scene.amplifiers
+    if len(a.noise_factors) != len(a.power_gains):
+        raise SceneError(
+            f"amplifiers.noise_factors has {len(a.noise_factors)} stages but "
+            f"amplifiers.power_gains has {len(a.power_gains)}: give one of each per stage"
+        )
+    _check_sun(scene)
+    if scene.receiver.kind == "gm_apd":
+        _check_gm_bins(scene)
+    q = scene.pose.quaternion_wxyz
+    if q and (len(q) != 4 or not all(math.isfinite(x) for x in q) or math.hypot(*q) < 1e-9):
+        raise SceneError(
+            f"pose.quaternion_wxyz = {q!r}: give 4 finite numbers w, x, y, z, not all 0"
+        )

@@ -19,10 +19,10 @@ from collections.abc import Callable
 from trame.app import get_server
 
 import simcore
-from app import connections, security
 from app.engine import FRAME_BUDGET_BYTES, Engine
 from app.logic import flyaround, parts, studies
 from app.logic.controller import AppLogic
+from app.server import connections, security
 from app.state import STATE_KEYS
 from app.ui.layout import build_layout
 
@@ -327,10 +327,10 @@ def _interrupt(*_) -> None:
 
 
 def run_launcher(args: argparse.Namespace) -> int:
-    """Each tab its own session: the launcher (app.launcher) until Ctrl+C or SIGTERM."""
+    """Each tab its own session: the launcher (app.server.launcher) until Ctrl+C or SIGTERM."""
     import asyncio  # noqa: PLC0415  (the launcher's loop: only without --shared)
 
-    from app import launcher  # noqa: PLC0415
+    from app.server import launcher  # noqa: PLC0415
 
     mib = launcher.MIB
     caps = launcher.default_caps(
@@ -385,7 +385,7 @@ def run_launcher(args: argparse.Namespace) -> int:
 
 def class_line(caps) -> str:
     """What the session cap means for a class of 30."""
-    from app import launcher  # noqa: PLC0415  (launcher mode only)
+    from app.server import launcher  # noqa: PLC0415  (launcher mode only)
 
     need_gb = launcher.MAX_DEFAULT_SESSIONS * caps.session_bytes / 1e9
     if caps.max_sessions >= launcher.MAX_DEFAULT_SESSIONS:

@@ -17,9 +17,9 @@ from pathlib import Path
 
 import pytest
 
-import app.versions
+import app.server.versions
 import simcore.cli
-from app.versions import CHECKED_RANGES, FrameworkVersionError, check_framework_versions
+from app.server.versions import CHECKED_RANGES, FrameworkVersionError, check_framework_versions
 
 ROOT = Path(__file__).resolve().parent.parent
 PROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
@@ -157,7 +157,7 @@ def test_lmapd_app_says_which_framework_is_outside_its_range(monkeypatch, capsys
     def version(name):
         return "2.8.0" if name == "wslink" else real(name)
 
-    monkeypatch.setattr(app.versions.metadata, "version", version)
+    monkeypatch.setattr(app.server.versions.metadata, "version", version)
     assert simcore.cli.main(["app", "--port", "1"]) == 2
     err = capsys.readouterr().err
     assert "wslink 2.8.0 is installed" in err

@@ -121,13 +121,14 @@ def test_no_module_of_the_app_imports_itself_through_a_circle():
 
 # the app's floors, lowest first: a module may import its own floor and those below, never above
 APP_FLOORS = (
-    ("app.state", "app.runner", "app.sync", "app.versions"),
+    ("app.state", "app.runner"),
     ("app.payloads", "app.engine"),
     ("app.logic",),
     ("app.ui",),
-    # the server: joins them, guards the door and the connections; the launcher: a process per
-    # session (started, or forked from the zygote)
-    ("app.main", "app.__main__", "app.security", "app.connections", "app.launcher", "app.zygote"),
+    # the app joined (app.main) and served (app.server: the door, the connections, the state sync
+    # and the framework patches; the launcher: a process per session, started or forked from the
+    # zygote)
+    ("app.main", "app.__main__", "app.server"),
 )
 
 

@@ -66,7 +66,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
 
 def run_cli(args: argparse.Namespace) -> int:
     """Serve the app until it is stopped; its exit status."""
-    versions = importlib.import_module("app.versions")  # standard library only
+    versions = importlib.import_module("app.server.versions")  # standard library only
     try:
         versions.check_framework_versions()  # before the patches of the framework are imported
     except versions.FrameworkVersionError as exc:

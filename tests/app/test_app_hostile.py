@@ -20,7 +20,7 @@ from support.hostile_client import Client, connect
 from support.launch import app_process
 from support.soak import rss_mb
 
-from app.security import MAX_MESSAGE_BYTES, Limits
+from app.server.security import MAX_MESSAGE_BYTES, Limits
 
 pytestmark = pytest.mark.slow
 
@@ -335,10 +335,10 @@ def test_the_last_write_wins_on_every_page(app):
 # -- 4. connections ----------------------------------------------------------------------------
 def test_half_open_connections_are_evicted_and_a_page_still_loads(app):
     """Connections that never finish their request line are capped per address (the longest
-    idle closed first, app.connections), so a page load goes through a crowd of them."""
+    idle closed first, app.server.connections), so a page load goes through a crowd of them."""
     import socket
 
-    from app.connections import PER_ADDRESS
+    from app.server.connections import PER_ADDRESS
 
     crowd = []
     try:

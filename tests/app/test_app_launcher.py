@@ -1,4 +1,4 @@
-"""The launcher (app.launcher: each tab its own session) without a browser.
+"""The launcher (app.server.launcher: each tab its own session) without a browser.
 
 Most tests run the launcher in this process with stand-in session processes
 (tests/support/fake_session.py, which start in well under a second); the last ones start the real
@@ -32,8 +32,8 @@ from aiohttp import web
 from support.hostile_client import Client
 from support.launch import app_process
 
-from app import connections
-from app import launcher as lau
+from app.server import connections
+from app.server import launcher as lau
 
 TOKEN = "launcher-test-token"
 FAKE = Path(__file__).resolve().parents[1] / "support" / "fake_session.py"

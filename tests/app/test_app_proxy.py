@@ -21,8 +21,8 @@ import pytest
 from aiohttp import web
 from test_app_launcher import FAKE, MOVE, NAVIGATION, TOKEN, caps, run
 
-from app import connections
-from app import launcher as lau
+from app.server import connections
+from app.server import launcher as lau
 
 CONFIG = Path(__file__).resolve().parents[2] / "docs" / "examples" / "nginx-lmapd.conf"
 WAIT_S = 60.0

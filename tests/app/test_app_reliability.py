@@ -411,7 +411,13 @@ def test_the_fly_around_controls_survive_garbage_too(app, key):
 def test_websocket_messages_over_the_cap_are_refused_before_allocation():
     from wslink import chunking
 
-    from app.security import MAX_MESSAGE_BYTES, BoundedUnChunker, Limits, PendingBudget, Refused
+    from app.server.security import (
+        MAX_MESSAGE_BYTES,
+        BoundedUnChunker,
+        Limits,
+        PendingBudget,
+        Refused,
+    )
 
     limits = Limits()
     unchunker = BoundedUnChunker(limits, PendingBudget(limits.total_budget_bytes))
@@ -477,7 +483,7 @@ class _Clock:
 def test_partial_messages_are_bounded_per_connection_in_total_and_in_time():
     from wslink.chunking import _encode_header
 
-    from app.security import BoundedUnChunker, Limits, PendingBudget, Refused
+    from app.server.security import BoundedUnChunker, Limits, PendingBudget, Refused
 
     limits = Limits(
         message_bytes=1000,

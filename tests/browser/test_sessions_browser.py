@@ -1,6 +1,6 @@
-"""Each tab its own scene (``lmapd app`` without ``--shared``: app.launcher) in a real Chromium:
-two tabs keep their own scenes and a reload opens a new one, the address bar shows neither the
-token nor the session, a link made in one tab opens a new session with the same scene, a bad
+"""Each tab its own scene (``lmapd app`` without ``--shared``: app.server.launcher) in a real
+Chromium: two tabs keep their own scenes and a reload opens a new one, the address bar shows neither
+the token nor the session, a link made in one tab opens a new session with the same scene, a bad
 session id gets the message page, and over the cap the 503 page says how many are open."""
 
 from __future__ import annotations

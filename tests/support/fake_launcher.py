@@ -1,5 +1,5 @@
-"""The real launcher (app.launcher) with stand-in sessions (tests/support/fake_session.py), run as
-``lmapd app`` runs it (the open-file limit raised, aiohttp's logs made short): for tests that
+"""The real launcher (app.server.launcher) with stand-in sessions (tests/support/fake_session.py),
+run as ``lmapd app`` runs it (the open-file limit raised, aiohttp's logs made short): for tests that
 need the launcher in a process of its own, such as under a low open-file limit.
 
     python tests/support/fake_launcher.py [--guard-idle-s S] [--per-address N]
@@ -19,7 +19,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from app import connections, launcher
+from app.server import connections, launcher
 
 FAKE_SESSION = Path(__file__).resolve().parent / "fake_session.py"
 

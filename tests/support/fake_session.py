@@ -1,8 +1,8 @@
-"""A stand-in for one session's app process, for the launcher's tests (app.launcher): it reads its
-token from stdin as ``python -m app --token-stdin`` does, listens on a free 127.0.0.1 port, prints
-the line the app prints, serves one page that says whether the request carried its token, and
-echoes websocket frames to a caller with its token and its own origin. It stops when stdin closes.
-
+"""A stand-in for one session's app process, for the launcher's tests (app.server.launcher): it
+reads its token from stdin as ``python -m app --token-stdin`` does, listens on a free 127.0.0.1
+port, prints the line the app prints, serves one page that says whether the request carried its
+token, and echoes websocket frames to a caller with its token and its own origin. It stops when
+stdin closes.
 Run as ``python tests/support/fake_session.py``; it starts in well under a second, so the tests
 can start many.
 """

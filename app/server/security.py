@@ -1,7 +1,7 @@
 """The app's websocket door: who may connect, what they may send, how much memory they may hold.
 
 Checked against trame-server 4.1.0, wslink 2.6.0 and aiohttp 3.14; every hook into those libraries
-is in this module (and the state synchronisation in ``app.sync``):
+is in this module (and the state synchronisation in ``app.server.sync``):
 
 * an aiohttp middleware (added through trame's ``on_server_bind`` hook, before the server starts)
   refuses, before the websocket is upgraded: a foreign or missing ``Origin`` (browsers always send
@@ -37,10 +37,10 @@ from wslink import protocol as wslink_protocol
 from wslink.chunking import HEADER_LENGTH, _decode_header
 from wslink.websocket import LinkProtocol
 
-from app import connections
 from app.logic.upload import MAX_UPLOAD_BYTES
+from app.server import connections
+from app.server.sync import ClientStateSync
 from app.state import MAX_MATERIAL_ENTRIES, echo
-from app.sync import ClientStateSync
 
 log = logging.getLogger(__name__)
 

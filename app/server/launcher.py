@@ -14,13 +14,13 @@ port) and proxies everything under ``/s/<session id>/`` to it:
   id off a projected address bar cannot join). The door answers with a page that moves the tab
   to ``/s/<id>/?<settings>#token=T`` (a same-site navigation, so the Strict cookie goes with it,
   even when the link was opened from another site); the page keeps the token for its share
-  links and then shows only ``/`` in the address bar (app.ui.layout's LINK_SCRIPT), so a reload
+  links and then shows only ``/`` in the address bar (app/static/link.js), so a reload
   or a shared link always opens a new session;
 * under ``/s/<id>/`` only GET and HEAD, and the websocket at ``/s/<id>/ws`` (trame's page builds
   it from its own path), are passed to that session's process, with the process's own private
   token (given on its stdin, never on a command line) and origin; the websocket's ``Origin`` and
   the session's cookie are checked first, and frames are limited to wslink's chunk size (the
-  process reassembles messages within ``app.security``'s limits and screens every call);
+  process reassembles messages within ``app.server.security``'s limits and screens every call);
 * an unknown or ended session gets a page saying so, with a link that starts a new one; over the
   caps (``Caps``: sessions, the processes' total memory, sessions per browser and per address) a
   503 page says how many are open;
@@ -29,10 +29,10 @@ port) and proxies everything under ``/s/<session id>/`` to it:
   open), or at ``max_age_s``; its page then says "session ended: reload for a new one". A
   process that dies is noticed and forgotten; SIGINT or SIGTERM stops every child, and a child
   whose launcher vanishes (even by SIGKILL) stops when its stdin closes;
-* connections (app.connections): idle or partial ones are closed after 10 s, each address holds
-  at most a few hundred, and refusals are logged one short line each, never with the token;
+* connections (app.server.connections): idle or partial ones are closed after 10 s, each address
+  holds at most a few hundred, and refusals are logged one short line each, never with the token;
 * with ``zygote`` (``lmapd app --fork-sessions``) the session processes are forked from one
-  preloaded parent (app.zygote) instead of started afresh: they share its modules, target and
+  preloaded parent (app.server.zygote) instead of started afresh: they share its modules, target and
   compiled kernels.
 """
 
@@ -59,7 +59,7 @@ import aiohttp
 import psutil
 from aiohttp import web
 
-from app import connections, security
+from app.server import connections, security
 
 log = logging.getLogger(__name__)
 
@@ -277,7 +277,7 @@ class Launcher:
         zygote: Callable[..., list[str]] | None = None,
     ):
         self.token = token
-        # sessions forked from a preloaded parent (app.zygote): its command, or None
+        # sessions forked from a preloaded parent (app.server.zygote): its command, or None
         self.zygote = Zygote(zygote(scene, options)) if zygote is not None else None
         self.caps = caps
         self.scene = scene
@@ -790,17 +790,23 @@ def _pss_bytes(pid: int) -> int | None:
     return None
 
 
-ZYGOTE_READY = "lmapd-sim zygote: ready"  # what app.zygote prints once it can fork
+ZYGOTE_READY = "lmapd-sim zygote: ready"  # what app.server.zygote prints once it can fork
 
 
 def token_digest(token: str) -> str:
-    """How app.zygote names a session's token in its output (never the token itself)."""
+    """How app.server.zygote names a session's token in its output (never the token itself)."""
     return hashlib.sha256(token.encode()).hexdigest()[:16]
 
 
 def zygote_command(scene: str | None, options: tuple[str, ...] = ()) -> list[str]:
-    """The command of the sessions' preloaded parent (app.zygote)."""
-    return [sys.executable, "-m", "app.zygote", *(["--scene", scene] if scene else []), *options]
+    """The command of the sessions' preloaded parent (app.server.zygote)."""
+    return [
+        sys.executable,
+        "-m",
+        "app.server.zygote",
+        *(["--scene", scene] if scene else []),
+        *options,
+    ]
 
 
 class ForkedProcess:
@@ -842,8 +848,9 @@ class ForkedProcess:
 
 
 class Zygote:
-    """The launcher's end of app.zygote: started on the first spawn, asked for one session per
-    ``spawn TOKEN`` line; its output tells each token's process and, once it listens, its port."""
+    """The launcher's end of app.server.zygote: started on the first spawn, asked for one session
+    per ``spawn TOKEN`` line; its output tells each token's process and, once it listens, its
+    port."""
 
     def __init__(self, command: list[str]):
         self.command = command

@@ -51,7 +51,7 @@ class ClientStateSync:
         self.state = state
         self.screens = dict(screens)
         self.protocol = None
-        self.clients: Callable[[], list[str]] = list  # set by app.security.Guard
+        self.clients: Callable[[], list[str]] = list  # set by app.server.security.Guard
         self._sent: dict[str, dict[str, bytes]] = {}  # page -> key -> packed value it holds
         # page -> client key -> values pushed to it since it last sent that key (the newest few)
         self._pushed: dict[str, dict[str, list[bytes]]] = {}

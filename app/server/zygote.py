@@ -1,4 +1,4 @@
-"""``python -m app.zygote [app options]``: the parent of the launcher's session processes.
+"""``python -m app.server.zygote [app options]``: the parent of the launcher's session processes.
 
 A session process spent about 2.3 s importing numpy, scipy, trame and vtk and 1 s loading its
 target before it could listen, and held its own copy of all of it and of the compiled kernels its
@@ -24,8 +24,8 @@ import os
 import signal
 import sys
 
-from app.launcher import ZYGOTE_READY as READY
-from app.launcher import token_digest as digest
+from app.server.launcher import ZYGOTE_READY as READY
+from app.server.launcher import token_digest as digest
 
 PR_SET_PDEATHSIG = 1  # prctl(2)
 
@@ -138,10 +138,10 @@ def _serve(app_main, args, scene, engine, token: str, budget: int) -> int:
 
 
 if __name__ == "__main__":
-    from app.versions import FrameworkVersionError, check_framework_versions
+    from app.server.versions import FrameworkVersionError, check_framework_versions
 
     try:
         check_framework_versions()
     except FrameworkVersionError as exc:
-        raise SystemExit(f"python -m app.zygote: {exc}") from None
+        raise SystemExit(f"python -m app.server.zygote: {exc}") from None
     raise SystemExit(main())

@@ -1,0 +1,12 @@
+"""Serving the app: the launcher (each tab its own session process, started or forked from the
+preloaded parent), the door (who may connect, what a page may send, how much memory it may hold),
+the connection guards, and the patches of trame-server and wslink with the releases they were
+checked against.
+
+``launcher`` the sessions and the proxy in front of them; ``zygote`` the sessions' preloaded
+parent; ``security`` the websocket door; ``connections`` the guarded listening sites (idle and
+partial connections, connections per address); ``sync`` the per-page state synchronisation that
+replaces trame's; ``versions`` the framework releases the patches were checked against, and the
+check made at start (standard library only: this package's ``__init__`` imports nothing, so that
+the check runs before any patch is loaded).
+"""

@@ -36,7 +36,8 @@ import numpy as np
 import trimesh
 
 from simcore.materials import read_material_map
-from simcore.target import MATERIAL_RULES, _opacity, load_mesh_file, part_materials
+from simcore.target import MATERIAL_RULES, load_mesh_file, part_materials
+from simcore.target_mesh import opacity
 
 PART_OF_MATERIAL = {"solar_panel": "solar_cells", "coating_1": "foil"}
 
@@ -75,7 +76,7 @@ def regroup(source: Path, forced: dict[str, str] | None = None) -> dict[str, dic
             continue
         material = getattr(getattr(mesh, "visual", None), "material", None)
         name = str(getattr(material, "name", "") or mesh.metadata.get("name") or "unnamed")
-        alpha = _opacity(mesh)
+        alpha = opacity(mesh)
         colours = face_colours(mesh)
         forced_part, _, where = (forced or {}).get(name, "").partition("@")
         if alpha < 0.5:

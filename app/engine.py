@@ -20,8 +20,8 @@ import simcore
 from app.payloads import cloud, image, scene3d, stats, waveforms
 from app.runner import StaleRequest
 from app.state import MAX_SELECTED_PIXELS
-from simcore.receivers import gm_apd
-from simcore.receivers.gm_limits import BYTES_PER_EVENT, MAX_EVENTS
+from simcore.receivers.gm_apd import frame as gm_frame
+from simcore.receivers.gm_apd.limits import BYTES_PER_EVENT, MAX_EVENTS
 
 # The server's budget for one frame. A Geiger-mode frame costs about 1.2 us of the two cores and
 # 101 bytes per recorded avalanche (receiver and detection stages; 11.5 M avalanches took 14 s):
@@ -86,17 +86,17 @@ def check_budget(pipeline: simcore.Pipeline, scene: simcore.Scene) -> None:
     """Raise FrameRefused if ``scene``'s frame would exceed the server's budget. Called before
     each stage ``pipeline`` computes: once the echo and background stages of ``scene`` are
     done (and the receiver is not), the Geiger-mode frame's avalanches are estimated exactly as
-    the core does before drawing them (``gm_apd.frame_avalanches``; and the core's own bounds,
-    ``gm_apd.frame_load``, so that no frame reaches its refusal)."""
+    the core does before drawing them (``gm_frame.frame_avalanches``; and the core's own bounds,
+    ``gm_frame.frame_load``, so that no frame reaches its refusal)."""
     if scene.receiver.kind != "gm_apd" or pipeline.cached("receiver", scene) is not None:
         return
     echo = pipeline.cached("echo", scene)
     background = pipeline.cached("background", scene)
     if echo is None or background is None:
         return
-    total = gm_apd.frame_avalanches(scene, echo, background)
-    worst, bound = gm_apd.frame_load(scene, echo, background)  # the core's own limits
-    if total > MAX_FRAME_AVALANCHES or worst > gm_apd.MAX_EVENTS_PER_PULSE or bound > MAX_EVENTS:
+    total = gm_frame.frame_avalanches(scene, echo, background)
+    worst, bound = gm_frame.frame_load(scene, echo, background)  # the core's own limits
+    if total > MAX_FRAME_AVALANCHES or worst > gm_frame.MAX_EVENTS_PER_PULSE or bound > MAX_EVENTS:
         raise FrameRefused(
             f"this frame would record about {total:.2g} avalanches "
             f"({total * BYTES_PER_EVENT / 1e9:.2g} GB; at most {MAX_FRAME_AVALANCHES:,} per "

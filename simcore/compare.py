@@ -60,11 +60,11 @@ def pulses_needed(scene: Scene, result, p_target: float) -> float:
             return math.inf
         n = math.ceil(math.log1p(-p_target) / math.log1p(-p))
         return float(n) if n <= MAX_PULSES else math.inf
-    from .receivers import gm_apd  # noqa: PLC0415
+    from .receivers.gm_apd import windows as gm_windows  # noqa: PLC0415
 
     for n in np.unique(np.geomspace(1, MAX_PULSES, 60).astype(int)):
         s = with_overrides(scene, {"gm.pulses": int(n)})
-        p_d = gm_apd.frame_detection_probability(s, result.echo, result.receiver)
+        p_d = gm_windows.frame_detection_probability(s, result.echo, result.receiver)
         if float(np.median(p_d)) >= p_target:
             return float(n)
     return math.inf

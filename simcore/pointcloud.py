@@ -223,3 +223,47 @@ CLOUD = Stage(
     reads=lambda s: (s.quality.tau_m,),
     compute=stage_cloud,
 )
+
+
+def first_photon_cloud(result) -> PointCloud:
+    """The single-pulse first-photon cloud of a result whose receiver records each pixel's first
+    avalanche of the frame's first pulse (``Detection.first_photon_range_m`` and
+    ``first_photon_is_echo``, the Geiger-mode array's): one point per pixel that fired, at that
+    avalanche's range (``is_outlier`` where it was not the echo's), with the cloud's attributes
+    and ground truth."""
+    d, e, rx = result.detection, result.echo, result.receiver
+    first_range_m = getattr(d, "first_photon_range_m", None)
+    if first_range_m is None:
+        raise ValueError(
+            "first_photon_cloud needs a receiver that records each pixel's first photon "
+            f"(receiver.kind = {result.scene.receiver.kind!r} does not)"
+        )
+    n = result.pixels**2
+    fired = np.flatnonzero(np.isfinite(first_range_m))
+    lit_of = np.full(n, -1, dtype=np.int64)
+    lit_of[e.pixel] = np.arange(len(e.pixel))
+    echo_pix = fired[d.first_photon_is_echo[fired]]
+    noise_pix = fired[~d.first_photon_is_echo[fired]]
+    li = lit_of[echo_pix]
+    cloud = assemble_cloud(
+        result.rays.pixel_directions,
+        result.pixels,
+        echo_pix,
+        first_range_m[echo_pix],
+        rx.peak_power_w[li],
+        rx.snr[li],
+        e.material_id[li],
+        e.facet_id[li],
+        noise_pix,
+        first_range_m[noise_pix],
+    )
+    truth = ground_truth(
+        e,
+        result.hits,
+        li,
+        first_range_m[echo_pix],
+        len(noise_pix),
+        tau_m=result.scene.quality.tau_m,
+    )
+    cloud.attributes.update(truth)
+    return cloud

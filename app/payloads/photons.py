@@ -14,9 +14,9 @@ import simcore
 from app.payloads.charts import base_layout, detection_text, note, range_axis, time_axis
 from app.payloads.style import SELECTION_COLORS
 from simcore.constants import C as C_M_S
-from simcore.receivers import gm_pileup
-from simcore.receivers.gm_apd import frame_pulse_energy_j, photon_energy_j
-from simcore.receivers.gm_limits import armed_probability
+from simcore.receivers.gm_apd import expected as gm_expected
+from simcore.receivers.gm_apd.frame import frame_pulse_energy_j, photon_energy_j
+from simcore.receivers.gm_apd.limits import armed_probability
 
 MARGIN_BINS = 12  # bins shown either side of the echo's waveform
 NO_ECHO_BINS = 80  # bins shown around the busiest bin of a pixel without an echo
@@ -160,7 +160,7 @@ def _element_pe(result: simcore.Result, flat: int) -> tuple[np.ndarray, np.ndarr
 def expected_counts(result: simcore.Result, w, flat: int, k0: int, k1: int) -> np.ndarray:
     """(k1 - k0,) the avalanches bins k0 .. k1 - 1 of pixel ``flat`` hold on average over the
     frame's pulses: its echo and constant rate through the dead time, the jitter and the bins
-    (``gm_pileup.expected_histogram``; the pixel armed at the window's start as the background's
+    (``gm_expected.expected_histogram``; the pixel armed at the window's start as the background's
     renewal process leaves it)."""
     scene, rx = result.scene, result.receiver
     gm = scene.gm
@@ -168,14 +168,14 @@ def expected_counts(result: simcore.Result, w, flat: int, k0: int, k1: int) -> n
     rate = np.asarray(rx.rate_hz[flat : flat + 1], dtype=np.float64)
     armed = armed_probability(rate, k0 * gm.bin_s, gm.dead_time_s)
     scale_s = result.echo.shape.tau_s / result.echo.shape.a
-    timing = gm_pileup.Timing(
+    timing = gm_expected.Timing(
         scale_s=scale_s,
         jitter_s=gm.jitter_s,
         bin_s=gm.bin_s,
         dead_time_s=gm.dead_time_s,
         n_pulses=gm.pulses,
     )
-    q, _ = gm_pileup.expected_histogram(
+    q, _ = gm_expected.expected_histogram(
         timing, element_t, element_pe, rate, np.array([k0]), k1 - k0, armed
     )
     return gm.pulses * q[0]

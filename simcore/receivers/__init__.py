@@ -38,7 +38,10 @@ if TYPE_CHECKING:
     from ..echo import EchoStage
 
 # kind -> the module that registers it when imported
-BUILT_IN = {"lm_apd": "simcore.receivers.lm_apd.receiver", "gm_apd": "simcore.receivers.gm_apd"}
+BUILT_IN = {
+    "lm_apd": "simcore.receivers.lm_apd.receiver",
+    "gm_apd": "simcore.receivers.gm_apd.receiver",
+}
 DEFAULT_KIND = DEFAULT_RECEIVER
 _REGISTERED: dict[str, Receiver] = {}
 

@@ -16,7 +16,7 @@ from support.app_helpers import change, small_app
 import simcore
 from app.engine import MAX_FRAME_AVALANCHES
 from app.state import PRESET_CHOICES, RECEIVER_KINDS, SPECS, SUN_MODES
-from simcore.receivers import gm_apd
+from simcore.receivers.gm_apd import frame as gm_frame
 
 
 @pytest.fixture(scope="module")
@@ -67,9 +67,9 @@ def test_the_avalanche_estimate_follows_the_real_runs(overrides):
         result = pipeline.run(scene)
     recorded = len(result.receiver.events)
     echo, background = pipeline.cached("echo", scene), pipeline.cached("background", scene)
-    estimate = gm_apd.frame_avalanches(scene, echo, background)
+    estimate = gm_frame.frame_avalanches(scene, echo, background)
     assert estimate == pytest.approx(recorded, rel=0.2)
-    worst, bound = gm_apd.frame_load(scene, echo, background)
+    worst, bound = gm_frame.frame_load(scene, echo, background)
     assert bound >= 0.95 * recorded  # the core's bound is one
 
 

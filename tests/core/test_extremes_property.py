@@ -21,7 +21,7 @@ from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
 import simcore
-from simcore.receivers import gm_limits
+from simcore.receivers.gm_apd import limits as gm_limits
 from simcore.scene import SceneError, with_overrides
 
 PIPE = simcore.Pipeline()

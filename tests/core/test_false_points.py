@@ -14,7 +14,7 @@ import pytest
 from scipy import stats
 
 import simcore
-from simcore.receivers import gm_apd
+from simcore.receivers.gm_apd import false_points as gm_false_points
 from simcore.receivers.lm_apd import detection
 
 PIPE = simcore.Pipeline()
@@ -147,7 +147,7 @@ def test_the_scan_probability_matches_a_continuous_time_simulation(mu, k, n_wind
     """Naus's approximation against the densest window of simulated Poisson processes: within
     4 binomial sds and 3 % (its own error, measured below 3 % here; 12 % at mu = 20, k = 40)."""
     n = 4000
-    p = gm_apd.scan_probability(np.array([mu]), np.array([k]), n_windows)[0]
+    p = gm_false_points.scan_probability(np.array([mu]), np.array([k]), n_windows)[0]
     sim = scan_by_simulation(np.random.default_rng(k), mu, k, n_windows, n)
     assert sim == pytest.approx(p, abs=4.0 * np.sqrt(p * (1.0 - p) / n) + 0.03 * p)
     # the union bound over disjoint windows that sets the threshold counts several times fewer

@@ -13,17 +13,19 @@ import pytest
 from scipy import special
 
 import simcore
+from simcore import pointcloud
 from simcore.constants import C, H
-from simcore.receivers import gm_apd
-from simcore.receivers import gm_events as ev
-from simcore.receivers import gm_histogram as gh
+from simcore.receivers.gm_apd import detection as gm_detection
+from simcore.receivers.gm_apd import events as gm_events
+from simcore.receivers.gm_apd import histogram as gm_histogram
+from simcore.receivers.gm_apd import response as gm_response
 
 S_S = 5e-9 / 2.446386  # Gamma(2, s) scale of the default 5 ns pulse [s]
 
 
 def one_surface(n_pixels, pe, t0_s=1e-6, rate_hz=0.0):
     """n pixels that see one surface at t0_s with pe photoelectrons per pulse."""
-    return ev.PixelRates(
+    return gm_events.PixelRates(
         rate_hz=np.full(n_pixels, float(rate_hz)),
         lit_pixel=np.arange(n_pixels),
         element_t_s=np.full((n_pixels, 1), t0_s),
@@ -35,18 +37,20 @@ def one_surface(n_pixels, pe, t0_s=1e-6, rate_hz=0.0):
 def test_the_inverse_hazard_of_gamma2_inverts_its_cdf():
     x = np.array([1e-6, 1e-3, 0.1, 1.0, 3.0, 10.0, 50.0])
     y = x - np.log1p(x)  # 1 - G(x) = (1 + x) e^-x = e^-y
-    np.testing.assert_allclose(-np.log1p(-ev.gamma2_cdf(x[:4])), y[:4], rtol=1e-12)
-    np.testing.assert_allclose(ev.gamma2_inverse_hazard(y), x, rtol=1e-9)
+    np.testing.assert_allclose(-np.log1p(-gm_events.gamma2_cdf(x[:4])), y[:4], rtol=1e-12)
+    np.testing.assert_allclose(gm_events.gamma2_inverse_hazard(y), x, rtol=1e-9)
     np.testing.assert_allclose(
-        ev.inverse_hazard_fast(y), x, rtol=1e-6, atol=1e-6
+        gm_events.inverse_hazard_fast(y), x, rtol=1e-6, atol=1e-6
     )  # < 2 fs at s = 2 ns
 
 
 @pytest.mark.parametrize("photons", [0.5, 2.0, 6.0])
 def test_per_pulse_detection_probability_is_one_minus_exp_of_minus_pde_n(photons):
     pde, n_pix, n_pulses = 0.35, 4000, 25
-    det = ev.Detector(gate_s=4e-6, dead_time_s=1.0, jitter_s=1e-12, bin_s=250e-12)
-    events = ev.simulate_frame(np.random.default_rng(1), one_surface(n_pix, pde * photons), det, 25)
+    det = gm_events.Detector(gate_s=4e-6, dead_time_s=1.0, jitter_s=1e-12, bin_s=250e-12)
+    events = gm_events.simulate_frame(
+        np.random.default_rng(1), one_surface(n_pix, pde * photons), det, 25
+    )
     trials = n_pix * n_pulses
     p = 1.0 - math.exp(-pde * photons)
     assert len(events) == len(np.unique(events.pixel * n_pulses + events.pulse))  # one per pulse
@@ -56,13 +60,15 @@ def test_per_pulse_detection_probability_is_one_minus_exp_of_minus_pde_n(photons
 def gamma2_bin_rates(pe, t0_s, bin_s, n_bins):
     """Lambda_j: mean primary events of a Gamma(2, s) echo in each bin [j b, (j + 1) b)."""
     edges = np.arange(n_bins + 1) * bin_s
-    return pe * np.diff(ev.gamma2_cdf((edges - t0_s) / S_S))
+    return pe * np.diff(gm_events.gamma2_cdf((edges - t0_s) / S_S))
 
 
 def test_the_piled_up_histogram_follows_coates_formula_and_the_correction_recovers_the_rate():
     pe, n_pix, n_pulses, bin_s, t0_s = 3.0, 2000, 50, 500e-12, 20e-9
-    det = ev.Detector(gate_s=60e-9, dead_time_s=1.0, jitter_s=1e-13, bin_s=bin_s)
-    events = ev.simulate_frame(np.random.default_rng(2), one_surface(n_pix, pe, t0_s), det, 50)
+    det = gm_events.Detector(gate_s=60e-9, dead_time_s=1.0, jitter_s=1e-13, bin_s=bin_s)
+    events = gm_events.simulate_frame(
+        np.random.default_rng(2), one_surface(n_pix, pe, t0_s), det, 50
+    )
     trials = n_pix * n_pulses
     n_j = np.bincount(events.bin, minlength=det.n_bins).astype(float)
     lam = gamma2_bin_rates(pe, t0_s, bin_s, det.n_bins)
@@ -88,16 +94,16 @@ def test_false_events_per_gate_follow_the_non_paralysable_dead_time(rate_hz, dea
     """E N(T) = sum_k P(S_k <= T), S_k = (k - 1) d + Gamma(k, r): the k-th event after the gate
     opens; for d >= T it is 1 - exp(-r T), for d << T about r T / (1 + r d)."""
     gate_s, n_pix, n_pulses = 5e-6, 2000, 20
-    rates = ev.PixelRates(
+    rates = gm_events.PixelRates(
         rate_hz=np.full(n_pix, rate_hz),
         lit_pixel=np.zeros(0, np.int64),
         element_t_s=np.zeros((0, 1)),
         element_pe=np.zeros((0, 1)),
         scale_s=S_S,
     )
-    det = ev.Detector(gate_s=gate_s, dead_time_s=dead_s, jitter_s=1e-12, bin_s=1e-9)
+    det = gm_events.Detector(gate_s=gate_s, dead_time_s=dead_s, jitter_s=1e-12, bin_s=1e-9)
     # the bins cannot lose an event at the edges: jitter 1 ps, the gate a whole number of bins
-    events = ev.simulate_frame(np.random.default_rng(3), rates, det, n_pulses)
+    events = gm_events.simulate_frame(np.random.default_rng(3), rates, det, n_pulses)
     k = np.arange(1, 200)
     free = gate_s - (k - 1) * dead_s
     expected = float(
@@ -116,13 +122,13 @@ def test_false_events_per_gate_follow_the_non_paralysable_dead_time(rate_hz, dea
 def window_estimates(pe, coates, n_pix=3000, n_pulses=60):
     """Centroid times of n_pix pixels of one surface at t0 over a fixed analysis window."""
     bin_s, t0_s, gate_s = 250e-12, 30e-9, 100e-9
-    det = ev.Detector(gate_s=gate_s, dead_time_s=1.0, jitter_s=1e-13, bin_s=bin_s)
+    det = gm_events.Detector(gate_s=gate_s, dead_time_s=1.0, jitter_s=1e-13, bin_s=bin_s)
     rng = np.random.default_rng(4)
-    events = ev.simulate_frame(rng, one_surface(n_pix, pe, t0_s), det, n_pulses)
-    h = gh.histogram(events, det.n_bins, n_pulses)
+    events = gm_events.simulate_frame(rng, one_surface(n_pix, pe, t0_s), det, n_pulses)
+    h = gm_histogram.histogram(events, det.n_bins, n_pulses)
     start = int((t0_s - 3 * S_S) / bin_s)
     length = int(16 * S_S / bin_s)
-    est = gh.centroid_times(
+    est = gm_histogram.centroid_times(
         h,
         np.arange(n_pix),
         np.full(n_pix, start),
@@ -143,7 +149,7 @@ def test_range_bias_of_the_raw_histogram_grows_with_signal_and_the_coates_correc
     t_raw, t0_s, t_c, det = window_estimates(pe, coates=False)
     t_cor, *_ = window_estimates(pe, coates=True)
     edges = np.r_[t_c - 0.5 * det.bin_s, t_c[-1] + 0.5 * det.bin_s]
-    lam = pe * np.diff(ev.gamma2_cdf((edges - t0_s) / S_S))
+    lam = pe * np.diff(gm_events.gamma2_cdf((edges - t0_s) / S_S))
     p = np.exp(-np.r_[0.0, np.cumsum(lam)[:-1]]) * -np.expm1(-lam)  # from the window's start
     predicted_raw_s = (p * t_c).sum() / p.sum() - (t0_s + 2 * S_S)
     bias_raw = t_raw - (t0_s + 2 * S_S)
@@ -218,10 +224,10 @@ def test_background_power_raises_the_threshold_and_gives_outliers(plate_scene):
     hv = H * C / scene.laser.wavelength_m
     rate = 20e6  # background photoelectrons per second per pixel
     power = np.full((32, 32), rate * hv / scene.gm.pde)
-    rx = gm_apd.respond(scene, echo, power)
-    det = gm_apd.detect(scene, echo, rx)
+    rx = gm_response.respond(scene, echo, power)
+    det = gm_detection.detect(scene, echo, rx)
     np.testing.assert_allclose(rx.rate_hz, rate + scene.gm.dark_count_rate_hz)
-    quiet = gm_apd.detect(scene, echo, gm_apd.respond(scene, echo, None))
+    quiet = gm_detection.detect(scene, echo, gm_response.respond(scene, echo, None))
     assert det.threshold_counts.min() > quiet.threshold_counts.max()
     # the union bound over the gate's windows caps each pixel's false-alarm probability: the
     # outliers are at most that many, plus 5 standard deviations of a Poisson count
@@ -232,7 +238,7 @@ def test_background_power_raises_the_threshold_and_gives_outliers(plate_scene):
 def test_the_first_photon_cloud_has_one_point_per_pixel_that_fired(plate_scene):
     scene = low_signal(plate_scene, 2.0)
     res = simcore.simulate(scene)
-    cloud = gm_apd.first_photon_cloud(res)
+    cloud = pointcloud.first_photon_cloud(res)
     fired = np.unique(res.receiver.events.pixel[res.receiver.events.pulse == 0])
     assert len(cloud) == len(fired)
     p = 1 - math.exp(-float(np.median(res.receiver.signal_pe)))
@@ -270,7 +276,7 @@ def test_a_frame_beyond_the_event_budget_is_refused_naming_the_key(plate_scene):
 
 def test_afterpulsing_and_crosstalk_add_their_own_events():
     n_pix, n_pulses = 32 * 32, 20
-    rates = ev.PixelRates(
+    rates = gm_events.PixelRates(
         rate_hz=np.full(n_pix, 1e6),
         lit_pixel=np.zeros(0, np.int64),
         element_t_s=np.zeros((0, 1)),
@@ -279,14 +285,16 @@ def test_afterpulsing_and_crosstalk_add_their_own_events():
     )
     base = dict(gate_s=2e-6, dead_time_s=50e-9, jitter_s=1e-12, bin_s=1e-9)
     rng = np.random.default_rng(9)
-    plain = ev.simulate_frame(rng, rates, ev.Detector(**base), n_pulses)
-    ap = ev.simulate_frame(rng, rates, ev.Detector(**base, afterpulsing=0.2), n_pulses)
-    ct = ev.simulate_frame(rng, rates, ev.Detector(**base, crosstalk=0.1), n_pulses)
-    n_ap = int((ap.kind == ev.EVENT_AFTERPULSE).sum())
-    n_own = int((ap.kind != ev.EVENT_AFTERPULSE).sum())
+    plain = gm_events.simulate_frame(rng, rates, gm_events.Detector(**base), n_pulses)
+    ap = gm_events.simulate_frame(
+        rng, rates, gm_events.Detector(**base, afterpulsing=0.2), n_pulses
+    )
+    ct = gm_events.simulate_frame(rng, rates, gm_events.Detector(**base, crosstalk=0.1), n_pulses)
+    n_ap = int((ap.kind == gm_events.EVENT_AFTERPULSE).sum())
+    n_own = int((ap.kind != gm_events.EVENT_AFTERPULSE).sum())
     # each avalanche afterpulses with p = 0.2 (unless the gate has closed): at most 0.2 per event
     assert 0.15 * (n_own + n_ap) < n_ap < 0.2 * (n_own + n_ap) + 4 * math.sqrt(n_ap)
-    n_ct = int((ct.kind == ev.EVENT_CROSSTALK).sum())
+    n_ct = int((ct.kind == gm_events.EVENT_CROSSTALK).sum())
     # p_ct per avalanche, less the edge pixels' missing neighbours and dead neighbours
     assert 0.07 * len(plain) < n_ct < 0.1 * len(plain) + 4 * math.sqrt(n_ct)
 
@@ -297,7 +305,11 @@ def test_the_threshold_count_holds_at_a_tnr_beyond_the_survival_functions_reach(
     resolves)."""
     from scipy import stats
 
-    from simcore.receivers.gm_apd import _tail_count, false_alarm_probability, threshold_counts
+    from simcore.receivers.gm_apd.windows import (
+        _tail_count,
+        false_alarm_probability,
+        threshold_counts,
+    )
 
     k = threshold_counts(np.array([1e-9, 0.01, 2.0]), 100.0, false_alarm_probability(30.0))
     assert np.all(np.isfinite(k)) and np.all(np.diff(k) > 0)

@@ -19,7 +19,7 @@ import simcore
 from simcore.cli import main
 from simcore.compare import compare
 from simcore.constants import C
-from simcore.receivers import gm_pileup as gp
+from simcore.receivers.gm_apd import expected as gm_expected
 
 S_S = 5e-9 / 2.446386  # Gamma(2, s) scale of the default 5 ns pulse [s]
 BIN_S, JITTER_S, T0_S = 250e-12, 200e-12, 10e-9
@@ -57,8 +57,10 @@ def first_photon_centroids(rng, pe, n_pix, n_pulses):
 @pytest.mark.parametrize("pe", [0.1, 1.0, 10.0, 100.0])
 def test_the_predicted_coates_bias_and_sd_match_a_first_photon_simulation(pe, n_pulses):
     n_pix = TOTAL_PULSES // n_pulses
-    t = gp.Timing(scale_s=S_S, jitter_s=JITTER_S, bin_s=BIN_S, dead_time_s=1.0, n_pulses=n_pulses)
-    q, alpha = gp.expected_histogram(
+    t = gm_expected.Timing(
+        scale_s=S_S, jitter_s=JITTER_S, bin_s=BIN_S, dead_time_s=1.0, n_pulses=n_pulses
+    )
+    q, alpha = gm_expected.expected_histogram(
         t,
         np.array([[T0_S]]),
         np.array([[pe]]),
@@ -67,7 +69,7 @@ def test_the_predicted_coates_bias_and_sd_match_a_first_photon_simulation(pe, n_
         LENGTH,
         np.ones(1),
     )
-    pred = gp.coates_centroid(t, q, alpha, np.array([START]), np.zeros(1))
+    pred = gm_expected.coates_centroid(t, q, alpha, np.array([START]), np.zeros(1))
     bias_pred = pred.t_s[0] - 2 * S_S - T0_S
     sd_pred = pred.sd_s[0]
     tc = first_photon_centroids(np.random.default_rng(int(pe * 10) + n_pulses), pe, n_pix, n_pulses)

@@ -253,13 +253,13 @@ def test_quality_is_computed_only_when_asked_for():
 
 
 def test_the_geiger_mode_first_photon_cloud_carries_the_ground_truth():
+    from simcore import pointcloud
     from simcore.pointcloud import GROUND_TRUTH
-    from simcore.receivers import gm_apd
 
     result = simcore.simulate(
         with_overrides(Scene(), {"receiver.kind": "gm_apd", "detector.pixels": 24})
     )
-    cloud = gm_apd.first_photon_cloud(result)
+    cloud = pointcloud.first_photon_cloud(result)
     attrs = cloud.attributes
     assert {name for name, _ in GROUND_TRUTH} <= set(attrs)
     echo = ~attrs["is_outlier"]

@@ -11,7 +11,10 @@ import pytest
 from scipy import special
 
 import simcore
-from simcore.receivers import gm_apd, gm_events, gm_limits
+from simcore.receivers.gm_apd import events as gm_events
+from simcore.receivers.gm_apd import frame as gm_frame
+from simcore.receivers.gm_apd import limits as gm_limits
+from simcore.receivers.gm_apd import windows as gm_windows
 from simcore.scene import (
     Scene,
     SceneError,
@@ -120,8 +123,8 @@ def test_the_analysis_window_estimate_bounds_the_one_detect_reads():
     res = simcore.simulate(scene)
     s_scale = res.echo.shape.tau_s / res.echo.shape.a
     g = scene.gm
-    pre = math.ceil((s_scale + gm_apd.JITTER_REACH * g.jitter_s) / g.bin_s) + 1
-    length = pre + math.ceil((gm_apd.ECHO_TAIL_SCALES * s_scale + 4 * g.jitter_s) / g.bin_s)
+    pre = math.ceil((s_scale + gm_frame.JITTER_REACH * g.jitter_s) / g.bin_s) + 1
+    length = pre + math.ceil((gm_frame.ECHO_TAIL_SCALES * s_scale + 4 * g.jitter_s) / g.bin_s)
     assert length <= gm_analysis_window_bins(scene) <= 1.01 * length + 2
 
 
@@ -199,10 +202,10 @@ def test_jitter_longer_than_the_pulse_runs_and_its_window_holds_the_gaussian_sha
     arrival is Gaussian: a window of w holds 2 Phi(w / 2 sigma) - 1 of it."""
     scene = _gm(**{"gm.jitter_s": jitter_s, "gm.bin_s": 1e-8 if jitter_s > 1e-8 else 2.5e-10})
     res = simcore.simulate(scene)
-    f = gm_apd.window_fraction(scene, res.echo)
+    f = gm_windows.window_fraction(scene, res.echo)
     assert 0.0 < f <= 1.0
     if jitter_s >= 1e-7:
-        w = gm_apd.window_bins(scene, res.echo) * scene.gm.bin_s
+        w = gm_windows.window_bins(scene, res.echo) * scene.gm.bin_s
         assert f == pytest.approx(special.erf(w / (2 * math.sqrt(2) * jitter_s)), abs=0.02)
 
 
@@ -211,11 +214,11 @@ def test_without_jitter_the_window_fraction_is_the_pulse_shape_closed_form():
     scene = _gm(**{"gm.jitter_s": 1e-15})
     res = simcore.simulate(scene)
     s = res.echo.shape.tau_s / res.echo.shape.a
-    w = gm_apd.window_bins(scene, res.echo) * scene.gm.bin_s
+    w = gm_windows.window_bins(scene, res.echo) * scene.gm.bin_s
     a = np.linspace(0.0, 5 * s, 200_001)
     g = gm_events.gamma2_cdf
     want = float(np.max(g((a + w) / s) - g(a / s)))
-    assert gm_apd.window_fraction(scene, res.echo) == pytest.approx(want, abs=1e-4)
+    assert gm_windows.window_fraction(scene, res.echo) == pytest.approx(want, abs=1e-4)
 
 
 @pytest.mark.parametrize("overrides", [{"gm.pulses": 1}, {"gm.dark_count_rate_hz": 1e9}])

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..stage import Cancelled, stop_check
+from ...stage import Cancelled, stop_check
 
 _THREADS = max(1, min(2, os.cpu_count() or 1))
 PAIRS_PER_CHUNK = 1 << 19  # (pixel, pulse) pairs simulated at once by one thread

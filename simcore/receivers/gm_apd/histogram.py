@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .gm_events import Events
+from .events import Events
 
 ESTIMATOR_BLOCK = 8192  # detected pixels per dense analysis block
 BLOCK_VALUES = 1 << 22  # bins of a dense analysis block at most (32 MB of float64 per array)

@@ -6,6 +6,7 @@ STAMP := $(VENV)/.installed-stamp
 HOST ?= 127.0.0.1
 PORT ?= 8080
 LINT_PATHS := simcore app tests scripts assets docs/hooks setup.py
+JS_FILES := $(wildcard app/static/*.js)
 
 .PHONY: app test bench soak lint docs format chromium clean
 
@@ -44,11 +45,13 @@ bench: $(STAMP)
 soak: $(STAMP) chromium
 	$(BIN)/python scripts/soak_app.py
 
-## make lint: what CI checks before the tests: ruff (lint, unused noqa, format) and mypy on simcore/
+## make lint: what CI checks before the tests: ruff (lint, unused noqa, format), mypy on simcore/,
+## and the page's scripts parsed by Node.js (node --check; Debian's nodejs)
 lint: $(STAMP)
 	$(BIN)/ruff check $(LINT_PATHS)
 	$(BIN)/ruff format --check $(LINT_PATHS)
 	$(BIN)/mypy
+	@for f in $(JS_FILES); do node --check $$f || exit 1; done; echo "node --check: $(words $(JS_FILES)) scripts parse"
 
 ## make docs: the documentation site (docs/, MkDocs Material) built offline into site/; a broken
 ## link or a generated part that fails stops the build (--strict)

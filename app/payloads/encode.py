@@ -3,7 +3,7 @@ images (binary) and engineering-unit labels.
 
 The state travels to the page as msgpack (wslink), which carries ``bytes`` as raw binary: an array
 goes as ``{bytes, dtype, shape}`` (no base64, no JSON number list) and the page turns it into the
-typed array vtk.js takes (``BINARY_SCRIPT`` in app.ui.views3d), a PNG into an object URL.
+typed array vtk.js takes (``app/static/binary.js``), a PNG into an object URL.
 """
 
 from __future__ import annotations

@@ -2,11 +2,11 @@
 mesh coloured by material where seen, grey where hidden, the field-of-view frustum, a legend)
 and the point cloud (coloured by range, SNR or outlier flag; outliers always red and larger).
 
-Data arrive as binary typed arrays in the trame state (``BINARY_SCRIPT`` makes vtk.js's typed
-arrays of them). The whole mesh is sent once and drawn grey; the facets seen are drawn over it in
-their material colours (a small mesh of their own: a few thousand facets, their corners and
-colours), sent only when the set of facets seen changes. Each view's camera reset (the button, or
-the 'r' key) goes to the home camera held in the state.
+Data arrive as binary typed arrays in the trame state (``app/static/binary.js`` makes vtk.js's typed
+arrays of them: ``trame.utils.lmapdBin``). The whole mesh is sent once and drawn grey; the facets
+seen are drawn over it in their material colours (a small mesh of their own: a few thousand facets,
+their corners and colours), sent only when the set of facets seen changes. Each view's camera reset
+(the button, or the 'r' key) goes to the home camera held in the state.
 """
 
 from __future__ import annotations
@@ -21,43 +21,6 @@ from app.payloads.style import HIDDEN_COLOR
 BACKGROUND = "[0.102, 0.110, 0.137]"  # #1a1c23
 BACKGROUND_RGB = (26, 28, 35)
 HIDDEN_RGB = [round(c / 255, 3) for c in encode.rgb_of(HIDDEN_COLOR)]
-
-# Binary payloads (app.payloads.encode): msgpack hands the page each ``bytes`` value as a
-# Uint8Array; ``bin(value)`` returns the value with every ``{bytes, dtype, shape}`` replaced by the
-# typed array vtk.js takes (copied into its own, aligned buffer), the same object for the same
-# state value (so a view updates only when its value changes); ``imageUrl(image)`` an object URL
-# of a ``{png}`` image (the previous one is released).
-BINARY_SCRIPT = """
-window.trame.utils.lmapdBin = (() => {
-  const TYPES = { uint8: Uint8Array, uint16: Uint16Array, uint32: Uint32Array,
-                  int32: Int32Array, float32: Float32Array, float64: Float64Array };
-  const made = new WeakMap();
-  const typed = (v) => {
-    const T = TYPES[v.dtype], own = new Uint8Array(v.bytes);  // a copy: aligned
-    return new T(own.buffer, 0, own.byteLength / T.BYTES_PER_ELEMENT);
-  };
-  const bin = (v) => {
-    if (!v || typeof v !== 'object' || ArrayBuffer.isView(v)) return v;
-    if (made.has(v)) return made.get(v);
-    let out;
-    if (v.dtype && ArrayBuffer.isView(v.bytes)) out = typed(v);
-    else if (Array.isArray(v)) out = v.map(bin);
-    else out = Object.fromEntries(Object.entries(v).map(([k, x]) => [k, bin(x)]));
-    made.set(v, out);
-    return out;
-  };
-  let image = { of: null, url: '' };
-  const imageUrl = (v) => {
-    if (!v || !ArrayBuffer.isView(v.png)) return '';
-    if (image.of !== v) {
-      if (image.url) URL.revokeObjectURL(image.url);
-      image = { of: v, url: URL.createObjectURL(new Blob([v.png], { type: 'image/png' })) };
-    }
-    return image.url;
-  };
-  return { bin, imageUrl };
-})();
-"""
 
 
 def _bin(key: str) -> str:

@@ -9,7 +9,7 @@ from trame.widgets import client, html
 from trame.widgets import vuetify3 as v3
 
 import simcore
-from app.logic.scene_map import preset_text
+from app.logic import preset_text
 from app.state import PRESET_CHOICES, SPECS, SUBRAY_CHOICES, ControlSpec
 from app.ui import design, flyaround, glossary, lessons
 from app.ui.upload import upload_panel
@@ -236,7 +236,7 @@ def display_choices() -> None:
 
 def share_panel() -> None:
     """The link that reproduces the current frame (settings in the query string), to copy
-    (app.ui.layout.LINK_SCRIPT makes it)."""
+    (app/static/link.js makes it)."""
     client.ClientStateChange(value="share_query", change="link_copied = ''")  # a new link
     with v3.VExpansionPanels(variant="accordion", classes="mt-2 share-panel"):
         with v3.VExpansionPanel():

@@ -25,6 +25,9 @@ from pathlib import Path
 import pytest
 from support.launch import free_port
 
+from app.logic.lessons import LESSONS_DIR
+from app.ui import static
+
 ROOT = Path(__file__).resolve().parent.parent
 # what the build reads: the packaging files, the README (the long description), the license, the
 # packages and the assets mapped into simcore.assets
@@ -103,6 +106,10 @@ def test_wheel_carries_the_assets_the_license_and_the_credits(installed):
     assert "simcore/py.typed" in names
     assert "simcore/data/astm_e490_am0_900_1700nm.csv" in names  # the Sun's spectrum
     assert "app/ui/layout.py" in names
+    for page_file in (*static.SCRIPTS, *static.STYLES):  # the page's scripts and styles
+        assert f"app/static/{page_file}" in names
+    for lesson in LESSONS_DIR.glob("*.toml"):  # the lessons
+        assert f"simcore/assets/lessons/{lesson.name}" in names
     assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names)
 
 

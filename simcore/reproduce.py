@@ -18,13 +18,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import signal
 
 from . import echo, orbit
 from .constants import C
 from .materials import MATERIAL_NAMES
 from .pipeline import Result
 from .receivers.lm_apd import timing
+from .result import n_peaks
 
 __all__ = [
     "CONVENTION_COLUMNS",
@@ -235,15 +235,6 @@ def subray_parts(result: Result) -> dict[int, np.ndarray]:
         part = np.where(block.face >= 0, face_part[np.maximum(block.face, 0)], -1)
         parts.update(zip(block.pixel.tolist(), part, strict=True))
     return parts
-
-
-def n_peaks(y: np.ndarray, fraction: float = 0.15) -> int:
-    """Local maxima of ``y`` at least ``fraction`` of its maximum high and as prominent."""
-    top = float(np.max(y)) if len(y) else 0.0
-    if top <= 0:
-        return 0
-    peaks, _ = signal.find_peaks(y, height=fraction * top, prominence=fraction * top)
-    return len(peaks)
 
 
 def delay_rms_s(arrivals_s: np.ndarray, weights: np.ndarray) -> np.ndarray:

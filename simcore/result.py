@@ -1,5 +1,6 @@
 """What one flash gives: :class:`Result` (the point cloud, the per-pixel products of every stage,
-the stage timings), one pixel's echo as a :class:`Waveform`, and the JSON summary."""
+the stage timings), one pixel's echo as a :class:`Waveform`
+(its peaks: ``n_peaks``), and the JSON summary."""
 
 from __future__ import annotations
 
@@ -38,6 +39,19 @@ class Waveform:
     p_detect: float
     detected: bool
     background_w: float = 0.0  # the pixel's background power at the detector (DC, AC-coupled out)
+
+
+def n_peaks(y: np.ndarray, fraction: float = 0.15) -> int:
+    """Local maxima of the waveform ``y`` at least ``fraction`` of its maximum high and as
+    prominent: the distinct echoes of one pixel (the double peaks of Eq. 29 where it sees
+    surfaces at two depths)."""
+    from scipy import signal  # noqa: PLC0415  (scipy.signal: loaded on first use)
+
+    top = float(np.max(y)) if len(y) else 0.0
+    if top <= 0:
+        return 0
+    peaks, _ = signal.find_peaks(y, height=fraction * top, prominence=fraction * top)
+    return len(peaks)
 
 
 @dataclass(kw_only=True)

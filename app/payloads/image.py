@@ -10,6 +10,7 @@ import numpy as np
 import simcore
 from app.payloads import encode
 from app.payloads.style import NO_ECHO_RGB, POWER_CMAP, RANGE_CMAP, colorbar
+from simcore.result import n_peaks
 
 MULTI_PEAK_RGB = (255, 64, 200)  # magenta: a pixel whose echo has two or more peaks
 ONE_PEAK_RGB = (118, 122, 134)  # grey: one peak
@@ -70,11 +71,9 @@ def _finite_range(values: np.ndarray) -> tuple[float, float]:
 # ----------------------------------------------------------------------------------------------
 def echo_peaks(result: simcore.Result, i: int) -> int:
     """Peaks of lit pixel ``i``'s noise-free band-limited echo, counted as
-    ``simcore.reproduce.n_peaks`` does (at least 15 % of the maximum high and as prominent):
+    ``simcore.result.n_peaks`` does (at least 15 % of the maximum high and as prominent):
     the double peaks of Eq. 29 where one pixel sees surfaces at two depths
     (docs/physics.md#eq-29)."""
-    from simcore.reproduce import n_peaks  # noqa: PLC0415  (scipy.signal: loaded on first use)
-
     return n_peaks(result.echo.waveform_per_j(int(i))[2])
 
 
@@ -85,7 +84,6 @@ def _two_peak_separation_s(result: simcore.Result) -> float:
     """The smallest delay [s] between two equal copies of the band-limited pulse whose sum
     ``echo_peaks`` counts as two peaks (bisection on the pulse table, 0.01 ns)."""
     from simcore.echo.stage import echo_waveform  # noqa: PLC0415
-    from simcore.reproduce import n_peaks  # noqa: PLC0415
 
     e = result.echo
     key = (e.shape.tau_s, e.shape.a, e.shape.sigma_h_s, e.dt_s)

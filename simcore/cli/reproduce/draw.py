@@ -11,7 +11,7 @@ from ...constants import C
 from ...materials import MATERIAL_NAMES
 from ...pipeline import Result
 from ...reproduce import fwhm_s
-from ...reproduce import n_peaks as count_peaks
+from ...result import n_peaks as count_peaks
 
 # Colours of the library materials (index = material id) and of the false alarms.
 MATERIAL_COLORS = ("#7f7f7f", "#17becf", "#1f5fbf", "#d4a017", "#3a9a3a", "#9467bd")

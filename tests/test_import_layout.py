@@ -231,3 +231,116 @@ def test_the_public_names_are_the_lazy_exports_and_resolve():
     assert simcore.io.CLOUD_SUFFIXES == (".ply", ".las")  # a submodule by attribute
     with pytest.raises(AttributeError):
         simcore.no_such_name  # noqa: B018
+
+
+# simcore's floors, lowest first: a module may import its own floor and those below, never above
+SIMCORE_FLOORS = (
+    # foundations: constants, errors, files, caches, threads, materials, the calibration shapes
+    (
+        "simcore._version",
+        "simcore._assets",
+        "simcore._draco_probe",
+        "simcore.constants",
+        "simcore.errors",
+        "simcore.tomlfile",
+        "simcore.cache",
+        "simcore.parallel",
+        "simcore.gltf",
+        "simcore.calibration",
+        "simcore.illumination",
+        "simcore.materials",
+    ),
+    # the scene, the orbits and the Sun, what a stage is, the pulse
+    ("simcore.scene", "simcore.orbit", "simcore.sun", "simcore.stage", "simcore.pulse"),
+    # the chain's physics up to each pixel's detections: target, rays and hits, echo, background
+    # light, the receivers (their figures among them)
+    (
+        "simcore.target",
+        "simcore.target_mesh",
+        "simcore.target_model",
+        "simcore.geometry",
+        "simcore.echo",
+        "simcore.background",
+        "simcore.receivers",
+        "simcore.gross_errors",
+    ),
+    # the point cloud and its quality against the ground truth
+    ("simcore.pointcloud", "simcore.quality"),
+    # the pipeline, its result, the files it writes
+    ("simcore.pipeline", "simcore.result", "simcore.io"),
+    # runs of many frames and their analyses
+    (
+        "simcore.sweep",
+        "simcore.flyaround",
+        "simcore.compare",
+        "simcore.reproduce",
+        "simcore.design",
+    ),
+    # the commands, and the package's public names (lazy re-exports of the floors below)
+    ("simcore.cli", "simcore"),
+)
+
+
+def simcore_floor(name: str) -> int:
+    for level, prefixes in enumerate(SIMCORE_FLOORS):
+        if any(name == p or name.startswith(p + ".") for p in prefixes if p != "simcore"):
+            return level
+    if name == "simcore":
+        return len(SIMCORE_FLOORS) - 1
+    raise AssertionError(f"{name} is on no floor of SIMCORE_FLOORS: place it")
+
+
+def upward_imports(graph: dict[str, set[str]]) -> list[tuple[str, str]]:
+    """The (importer, imported) pairs of ``graph`` whose imported module is on a higher floor."""
+    return sorted(
+        (a, b)
+        for a, imported in graph.items()
+        for b in imported
+        if simcore_floor(b) > simcore_floor(a)
+    )
+
+
+def test_the_floor_rule_finds_the_receivers_old_arrow_up_to_the_point_cloud():
+    # the arrow that receivers/gm_apd.py had (its first-photon cloud), now gone
+    graph = {"simcore.receivers.gm_apd.detection": {"simcore.pointcloud", "simcore.echo"}}
+    assert upward_imports(graph) == [("simcore.receivers.gm_apd.detection", "simcore.pointcloud")]
+
+
+def test_simcore_never_imports_upwards():
+    assert upward_imports(import_graph("simcore")) == []
+
+
+def test_the_apps_payloads_import_no_reproduction_code():
+    simcore_modules = project_modules("simcore")
+    found = []
+    for name, path in project_modules("app").items():
+        if name.startswith("app.payloads"):
+            for imported in imported_modules(name, path, simcore_modules):
+                if imported == "simcore.reproduce" or imported.startswith("simcore.cli.reproduce"):
+                    found.append((name, imported))
+    assert found == []
+
+
+def test_the_ui_reads_the_logic_only_through_its_package_interface():
+    """app/ui takes from app/logic only the names app/logic/__init__.py declares for it
+    (``__all__``): no logic module, constant or function of its own."""
+    import app.logic
+
+    modules = project_modules("app")
+    internals, names = [], []
+    for name, path in modules.items():
+        if not name.startswith("app.ui"):
+            continue
+        internals += [
+            (name, m) for m in imported_modules(name, path, modules) if m.startswith("app.logic.")
+        ]
+        package = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not isinstance(node, ast.ImportFrom):
+                continue
+            base = package[: len(package) - (node.level - 1)] if node.level else []
+            source = ".".join(base + ([node.module] if node.module else []))
+            if source == "app.logic":
+                names += [(name, a.name) for a in node.names if a.name not in app.logic.__all__]
+    assert internals == []
+    assert names == []

@@ -9,7 +9,7 @@ from trame.widgets import client, html
 from trame.widgets import vuetify3 as v3
 
 import simcore
-from app.logic.scene_map import preset_text
+from app.logic import preset_text
 from app.state import PRESET_CHOICES, SPECS, SUBRAY_CHOICES, ControlSpec
 from app.ui import design, flyaround, glossary, lessons
 from app.ui.upload import upload_panel

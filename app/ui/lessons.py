@@ -7,7 +7,7 @@ from __future__ import annotations
 from trame.widgets import client, html
 from trame.widgets import vuetify3 as v3
 
-from app.logic.lessons import LESSONS
+from app.logic import LESSONS
 from app.ui.widgets import html_attributes
 
 CSS = """

@@ -6,7 +6,7 @@ from __future__ import annotations
 from trame.widgets import html
 from trame.widgets import vuetify3 as v3
 
-from app.logic.upload import ALLOWED_SUFFIXES, SCALE_RANGE
+from app.logic import ALLOWED_SUFFIXES, SCALE_RANGE
 
 # A file over the size cap is refused in the page, before its bytes are read and sent (the server
 # checks again: a client need not run this page).

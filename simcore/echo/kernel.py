@@ -29,7 +29,7 @@ from numba import prange
 
 from ..cache import cache_dir
 
-__all__ = ["echo_features", "lock", "sample_echoes", "set_threads"]
+__all__ = ["echo_features", "jit", "lock", "sample_echoes", "set_threads"]
 
 if not numba.config.CACHE_DIR:  # $NUMBA_CACHE_DIR unset: the project's own cache folder
     _folder = cache_dir()
@@ -37,15 +37,17 @@ if not numba.config.CACHE_DIR:  # $NUMBA_CACHE_DIR unset: the project's own cach
         numba.config.CACHE_DIR = str(_folder / "numba")
 
 
-def _jit(parallel: bool = False):
-    """numba.njit with the on-disk cache, or without it where no cache folder is writable."""
+def jit(parallel: bool = False, **options):
+    """numba.njit (nogil, numpy's error model, ``options`` passed on) with the on-disk cache, or
+    without it where no cache folder is writable."""
 
     def wrap(fn):
+        kw = {"nogil": True, "parallel": parallel, "error_model": "numpy", **options}
         try:
-            return numba.njit(cache=True, nogil=True, parallel=parallel, error_model="numpy")(fn)
+            return numba.njit(cache=True, **kw)(fn)
         except RuntimeError as exc:  # "cannot cache function ...: no locator available"
-            warnings.warn(f"echo kernel not cached on disk ({exc})", stacklevel=2)
-            return numba.njit(nogil=True, parallel=parallel, error_model="numpy")(fn)
+            warnings.warn(f"compiled kernel not cached on disk ({exc})", stacklevel=2)
+            return numba.njit(**kw)(fn)
 
     return wrap
 
@@ -60,7 +62,7 @@ def set_threads(n: int) -> None:
     numba.set_num_threads(max(1, min(int(n), numba.config.NUMBA_NUM_THREADS)))
 
 
-@_jit()
+@jit()
 def _at(table, slope, t0_s, inv_step, t_s):
     """The pulse table at time t_s, linearly interpolated (PulseShape.lookup, scalar)."""
     x = (t_s - t0_s) * inv_step
@@ -69,7 +71,7 @@ def _at(table, slope, t0_s, inv_step, t_s):
     return (x - i) * slope[i] + table[i]
 
 
-@_jit()
+@jit()
 def _echo_at(arrivals, weights, n_el, table, slope, t0_s, inv_step, t_s):
     """y(t_s) = sum_k w_k p(t_s - t_k) over the first n_el elements."""
     y = 0.0
@@ -78,14 +80,14 @@ def _echo_at(arrivals, weights, n_el, table, slope, t0_s, inv_step, t_s):
     return y
 
 
-@_jit()
+@jit()
 def _sample(y, g0_s, dt_s, arrivals, weights, n_el, table, slope, t0_s, inv_step):
     """y[j] = echo at g0_s + j dt_s, j = 0..len(y)-1."""
     for j in range(len(y)):
         y[j] = _echo_at(arrivals, weights, n_el, table, slope, t0_s, inv_step, g0_s + dt_s * j)
 
 
-@_jit()
+@jit()
 def _parabola_offset(y0, y1, y2):
     """Vertex of the parabola through three equally spaced values, in steps (0 if not concave),
     clipped to one step."""
@@ -94,7 +96,7 @@ def _parabola_offset(y0, y1, y2):
     return min(max(off, -1.0), 1.0)
 
 
-@_jit()
+@jit()
 def _refined_peak(y, g0_s, dt_s, arrivals, weights, n_el, table, slope, t0_s, inv_step):
     """Peak of the sampled echo y: best sample, parabolic vertex, one more parabolic step on
     exact values a quarter sample either side, the exact value there."""
@@ -115,13 +117,13 @@ def _refined_peak(y, g0_s, dt_s, arrivals, weights, n_el, table, slope, t0_s, in
     return max(top, max(e1, y1))
 
 
-@_jit()
+@jit()
 def _secant(ta, tb, fa, fb):
     """The secant (regula falsi) point of a bracket."""
     return ta - fa * (tb - ta) / (fb - fa if fb != fa else 1.0)
 
 
-@_jit()
+@jit()
 def _illinois_step(ta, tb, fa, fb, side, tm, fm):
     """One Illinois step (features._illinois): the bracket after f(tm) = fm."""
     if fm < 0:
@@ -133,7 +135,7 @@ def _illinois_step(ta, tb, fa, fb, side, tm, fm):
     return ta, tm, fa, fm, 1
 
 
-@_jit()
+@jit()
 def _pixel(
     a, w, n_el, tables, t0_s, inv_step, dt_s, cfd_delay_s, cfd_fraction, t_begin_s, span_s, steps
 ):
@@ -227,7 +229,7 @@ def _pixel(
     return peak, t_half, slope_out, peak_raw, level0, level1, level2
 
 
-@_jit(parallel=True)
+@jit(parallel=True)
 def _features(
     arrivals, weights, tables, t0_s, inv_step, dt_s, cfd_delay_s, cfd_fraction, t_begin_s, span_s,
     steps, out,
@@ -288,7 +290,7 @@ def echo_features(
     return out
 
 
-@_jit()
+@jit()
 def _sample_row(out, row, col0, t_base_s, j0, j1, dt_s, a, w, table, slope, t0_s, inv_step, scale):
     """out[row, col0 + (j - j0)] += scale * y(t_base_s + j dt_s) for j0 <= j < j1: y summed in
     float64 over the elements of weight > 0, scaled, rounded to out's precision, added."""
@@ -308,7 +310,7 @@ def _sample_row(out, row, col0, t_base_s, j0, j1, dt_s, a, w, table, slope, t0_s
         out[row, col0 + j - j0] += cast[0]
 
 
-@_jit(parallel=True)
+@jit(parallel=True)
 def _sample_rows(out, rows, col0, t_base_s, j0, j1, dt_s, a, w, table, slope, t0_s, inv, scale):
     for i in prange(len(rows)):
         _sample_row(
@@ -317,7 +319,7 @@ def _sample_rows(out, rows, col0, t_base_s, j0, j1, dt_s, a, w, table, slope, t0
         )  # fmt: skip
 
 
-@_jit()
+@jit()
 def _sample_rows_serial(
     out, rows, col0, t_base_s, j0, j1, dt_s, a, w, table, slope, t0_s, inv, scale
 ):

@@ -18,6 +18,7 @@ import simcore
 from simcore import echo
 from simcore.echo import EchoStage
 from simcore.receivers.lm_apd import detection, montecarlo, timing
+from simcore.receivers.lm_apd.montecarlo import noise as mc_noise
 
 C = sc.c
 MAD_SIGMA = 1.4826  # robust sigma = 1.4826 x median absolute deviation (Gaussian)
@@ -478,3 +479,79 @@ def test_shot_aware_jitter_reduces_to_eq25_without_shot_noise():
     assert montecarlo.cfd_sigma_shot_aware_m(SHAPE, RX_THERMAL, i, T_D, K_ATT) == pytest.approx(
         eq25, rel=1e-5
     )
+
+
+# ----------------------------------------------------------------------------------------------
+# the compiled noise draw (docs/physics.md#mc-noise-draw)
+# ----------------------------------------------------------------------------------------------
+def impulse_covariance(taps, r, phase, lag):
+    """Covariance of outputs j = r q + phase and j + lag of white impulses of variance r on every
+    r-th input sample through ``taps`` (unit white variance on the fine grid)."""
+    m = (len(taps) - 1) // 2
+    j = phase + 4 * len(taps)  # far from the ends
+    cols = np.arange(0, 12 * len(taps), r)  # the impulses' input samples
+    a = np.zeros(len(cols))
+    b = np.zeros(len(cols))
+    for out, at in ((a, j), (b, j + lag)):
+        k = cols - at  # y[j] = sum_k taps[k] x[j + k]
+        ok = (k >= 0) & (k <= 2 * m)
+        out[ok] = taps[k[ok]]
+    return r * float(np.sum(a * b))
+
+
+def test_white_impulses_every_r_samples_keep_the_fine_draws_covariance():
+    band = montecarlo.band_limit(DT, B)
+    r = mc_noise.white_step(DT, band.sigma_h_s)
+    assert r == 2  # the default step is 0.354 sigma_h
+    fine = np.correlate(band.taps, band.taps, mode="full")  # lag l at index 2m + l
+    m = band.half_width
+    worst = 0.0
+    for phase in range(r):
+        for lag in range(0, 2 * m + 1):
+            cov = impulse_covariance(band.taps, r, phase, lag)
+            worst = max(worst, abs(cov - fine[2 * m + lag]) / fine[2 * m])
+    assert worst < 2 * mc_noise.NONSTATIONARITY
+    # a coarser draw would not do: one more sample between impulses moves the variance
+    coarse = [impulse_covariance(band.taps, r + 1, p, 0) for p in range(r + 1)]
+    assert max(abs(c - fine[2 * m]) / fine[2 * m] for c in coarse) > 1e-5
+
+
+def test_the_noise_kernels_normal_deviates_have_the_normal_law():
+    n = 2_000_000
+    z = mc_noise.normals(n, key=2024, stream=7)
+    other = mc_noise.normals(n, key=2024, stream=8)
+    assert abs(z.mean()) < 5 / np.sqrt(n)
+    assert abs(z.var() - 1.0) < 5 * np.sqrt(2.0 / n)
+    assert abs(stats.skew(z)) < 5 * np.sqrt(6.0 / n)
+    assert abs(stats.kurtosis(z)) < 5 * np.sqrt(24.0 / n)
+    assert stats.kstest(z, "norm").pvalue > 1e-4
+    # the ziggurat's tail beyond its base strip (R = 3.44) and far beyond
+    for x in (3.0, 3.5, 4.5):
+        expected = n * 2 * stats.norm.sf(x)
+        assert abs(np.count_nonzero(np.abs(z) > x) - expected) < 5 * np.sqrt(expected)
+    # streams of neighbouring pixels are uncorrelated, and each is reproducible
+    assert abs(np.corrcoef(z, other)[0, 1]) < 5 / np.sqrt(n)
+    np.testing.assert_array_equal(z[:1000], mc_noise.normals(1000, key=2024, stream=7))
+
+
+def test_the_noise_filter_is_the_sampled_convolution_of_the_impulses():
+    """The polyphase filter gives what the band limit's taps give on the white input it left in
+    x (impulses every r samples plus the shot noise where the signal is), to float32 rounding."""
+    band = montecarlo.band_limit(DT, B)
+    r = mc_noise.white_step(DT, band.sigma_h_s)
+    m = band.half_width
+    x = np.zeros((5, 3000 + 2 * m), dtype=np.float32)
+    x[2, 700:760] = 40 * RX.sigma_n_a  # a signal: its shot noise on the fine grid
+    before = x.copy()
+    scale = np.array([1.0, 2.0, 0.5, 1.0, 1.0])
+    y = mc_noise.noise_rows(x, 99, 10, scale, 1e-6, band.taps, r)
+    white = (x - before).astype(np.float64)
+    assert np.count_nonzero(white[0]) == len(range(0, x.shape[1], r))  # impulses only
+    assert (
+        np.count_nonzero(white[2, 1:700:2]) == 0
+        and np.count_nonzero(white[2, 701:760:2]) == 60 // 2
+    )
+    direct = np.array([np.convolve(w, band.taps, mode="valid") for w in white])
+    assert np.max(np.abs(y - direct)) < 1e-6 * np.abs(direct).max()
+    # the row scale multiplies the impulses
+    np.testing.assert_allclose(white[1, ::r].std() / white[0, ::r].std(), 2.0, rtol=0.1)

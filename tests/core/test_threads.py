@@ -80,3 +80,34 @@ def test_lmapd_threads_sets_it_and_refuses_less_than_one(capsys):
         os.environ.pop(parallel.THREADS_ENV, None)
     assert main(["keys", "--threads", "0"]) == 2
     assert "--threads 0" in capsys.readouterr().err
+
+
+def test_the_monte_carlo_gives_the_same_stops_at_1_2_and_3_threads():
+    """The waveform Monte Carlo's noise comes from one stream per pixel (docs/physics.md#mc-noise-
+    draw): the same seed gives the same stops on any number of threads, and (without the timing
+    quantisation, whose draws follow the chunks) on any chunking of the array."""
+    from support.mc_scene import RX, SCENE, SHAPE, E
+
+    from simcore.receivers.lm_apd import montecarlo
+
+    rng = np.random.default_rng(5)
+    arrivals = 2.0 * rng.uniform(498.0, 502.0, size=(40, 1)) / 299_792_458.0
+    i_pk = RX.peak_current_for_snr(8.0)  # SNR 8
+    weights = np.full((40, 1), i_pk / (RX.responsivity_a_w * E * SHAPE.peak_w_per_j))
+
+    def run(threads, max_bytes=1 << 20, resolution_s=None):
+        extra = {} if resolution_s is None else {"resolution_s": resolution_s}
+        return montecarlo.scene_gate(
+            np.random.default_rng(11), SCENE, RX, arrivals, weights, tnr=3.0, gate_m=100.0,
+            n_pixels_total=200, n_threads=threads, max_bytes=max_bytes, **extra,
+        )  # fmt: skip
+
+    one = run(1)
+    assert one.n_false_alarms > 0 and one.detected.any()
+    for threads in (2, 3):
+        other = run(threads)
+        for name in ("detected", "range_m", "n_stops", "false_alarm_pixel", "false_alarm_range_m"):
+            np.testing.assert_array_equal(getattr(other, name), getattr(one, name), err_msg=name)
+    exact = [run(t, max_bytes=b, resolution_s=0.0) for t, b in ((1, 1 << 20), (2, 1 << 18))]
+    for name in ("detected", "range_m", "false_alarm_pixel", "false_alarm_range_m"):
+        np.testing.assert_array_equal(getattr(exact[0], name), getattr(exact[1], name))

@@ -45,13 +45,17 @@ scripts/plot_mc_agreement.py):
 
 Every pixel of the array is simulated over the whole gate, lit or not, in chunks of pixels whose
 working set is at most ``max_bytes`` per worker thread, so memory stays bounded whatever the pixel
-count. Chunks draw from independent child generators spawned from the caller's generator: a run is
-reproducible for a given seed and ``max_bytes`` (the chunking), whatever the number of threads.
+count. Each pixel draws its Gaussian white noise from its own stream (a 64-bit key drawn once per
+flash from the caller's generator, and the pixel's index: ``noise``), on every second sample at
+the default step (docs/physics.md#mc-noise-draw); the timing quantisation comes from child
+generators spawned one per chunk. A run is reproducible for a given seed and ``max_bytes`` (the
+chunking), whatever the number of threads.
 
 The package, one module per step:
 
 ``currents``       noisy currents through the band limit (step 1)
 ``discriminator``  arming, the CFD stop, the hold-off, the reference stop (step 2)
+``noise``          the compiled noise kernel: per-pixel streams, the white step, the filter
 ``gate``           the whole gate of the whole array, in chunks on threads; the pipeline's entry
                    point :func:`montecarlo_detection` (step 3)
 ``crosscheck``     the shot-noise-aware CFD jitter; the gate for synthetic echoes of a scene

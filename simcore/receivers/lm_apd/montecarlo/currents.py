@@ -80,6 +80,8 @@ def noisy_band_limited(
     add_signal: bool = True,
     row_scale: np.ndarray | None = None,
     photon=None,
+    stream0: int = 0,
+    key: int | None = None,
 ) -> np.ndarray:
     """Add the white current noise to the padded signal ``x`` IN PLACE, band-limit it.
 
@@ -94,6 +96,13 @@ def noisy_band_limited(
     drawn photon by photon with McIntyre gains instead (docs/physics.md#mcintyre); a row's
     background shot noise (``row_scale``) is then added as Gaussian noise.
 
+    Gaussian noise is drawn by the compiled noise kernel (:mod:`.noise`) where numba loads: the
+    signal-free white noise on every r-th sample (:func:`.noise.white_step`, r = 2 at the default
+    step; docs/physics.md#mc-noise-draw), row i from its own stream ``stream0 + i`` under
+    ``key`` (a 64-bit number; None: drawn from ``rng``), filtered by the polyphase taps; the
+    shot noise on the fine grid. Without numba (and with ``photon``) every sample is drawn from
+    ``rng`` and filtered by FFT.
+
     The white sample variance ``S(t) / (2 dt)`` is drawn as a signal-free part for every sample
     plus an independent shot part where i_s > 0: the same normal law. The convolution is linear,
     so h_B * (i_s + n) is computed as h_B * n over the whole rows (FFT, in x's dtype) plus
@@ -106,7 +115,21 @@ def noisy_band_limited(
     n_cols = x.shape[1]
     taps = band.taps.astype(x.dtype)[None, :]
     rows = np.flatnonzero((x > 0).any(axis=1)) if add_signal or noise else np.zeros(0, np.int64)
-    if noise and photon is not None:  # photon statistics (montecarlo.photon.PhotonNoise)
+    filtered = _filtered_signal(x, rows, band) if add_signal and len(rows) else None
+    kernel = _noise_kernel() if noise and photon is None else None
+    if kernel is not None:
+        assert rng is not None and receiver is not None  # noise needs both
+        r = kernel.white_step(dt, band.sigma_h_s)
+        sigma_w = receiver.sigma_n_a / math.sqrt(2.0 * dt * receiver.bandwidth_hz)
+        scale = np.full(x.shape[0], math.sqrt(r) * sigma_w)
+        if row_scale is not None:
+            scale *= np.asarray(row_scale, dtype=np.float64)
+        if key is None:
+            key = int(rng.integers(1 << 63))
+        shot_per_a = _shot_density_per_a(receiver) / (2.0 * dt)
+        y = kernel.noise_rows(x, key, stream0, scale, shot_per_a, band.taps, r)
+        white = None  # x holds signal + white noise already
+    elif noise and photon is not None:  # photon statistics (montecarlo.photon.PhotonNoise)
         assert rng is not None and receiver is not None  # noise needs both
         white = rng.standard_normal(x.shape, dtype=x.dtype)
         white *= x.dtype.type(photon.gaussian_sigma_a(receiver, dt))
@@ -131,22 +154,44 @@ def noisy_band_limited(
     else:
         white = None
         y = np.zeros((x.shape[0], n_cols - 2 * m), dtype=x.dtype)
-    if add_signal and len(rows):
-        nz = x[rows] > 0
-        first = np.argmax(nz, axis=1)
-        last = n_cols - 1 - np.argmax(nz[:, ::-1], axis=1)
-        span = int((last - first).max()) + 1
-        cols = np.minimum(first[:, None] + np.arange(span)[None, :], n_cols - 1)
-        block = np.where(cols <= last[:, None], x[rows[:, None], cols], 0.0).astype(np.float64)
-        conv = signal.fftconvolve(block, band.taps[None, :], mode="full", axes=1)
-        # full-convolution output o of a block starting at column a is y[a - 2m + o]
-        j = first[:, None] - 2 * m + np.arange(conv.shape[1])[None, :]
-        ok = (j >= 0) & (j < y.shape[1])
-        r = np.broadcast_to(rows[:, None], j.shape)
-        y[r[ok], j[ok]] += conv[ok].astype(y.dtype)
+    if filtered is not None:
+        r_sig, j_sig, values = filtered
+        y[r_sig, j_sig] += values.astype(y.dtype)
     if white is not None:
         x += white
     return y
+
+
+def _filtered_signal(x: np.ndarray, rows: np.ndarray, band: BandLimit):
+    """h_B * i_s of the signal rows of the padded input x, in float64 on each row's own span:
+    (row, output column, value) of every output sample it reaches."""
+    m = band.half_width
+    n_out = x.shape[1] - 2 * m
+    nz = x[rows] > 0
+    n_cols = x.shape[1]
+    first = np.argmax(nz, axis=1)
+    last = n_cols - 1 - np.argmax(nz[:, ::-1], axis=1)
+    span = int((last - first).max()) + 1
+    cols = np.minimum(first[:, None] + np.arange(span)[None, :], n_cols - 1)
+    block = np.where(cols <= last[:, None], x[rows[:, None], cols], 0.0).astype(np.float64)
+    conv = signal.fftconvolve(block, band.taps[None, :], mode="full", axes=1)
+    # full-convolution output o of a block starting at column a is y[a - 2m + o]
+    j = first[:, None] - 2 * m + np.arange(conv.shape[1])[None, :]
+    ok = (j >= 0) & (j < n_out)
+    r = np.broadcast_to(rows[:, None], j.shape)
+    return r[ok], j[ok], conv[ok]
+
+
+def _noise_kernel():
+    """The compiled noise kernel (:mod:`.noise`), or None where the echo kernel runs on numpy
+    (numba unavailable or ``$LMAPD_NO_NUMBA``)."""
+    from ....echo.features import compiled_kernel  # noqa: PLC0415  (loads numba on first use)
+
+    if compiled_kernel() is None:
+        return None
+    from . import noise  # noqa: PLC0415  (numba)
+
+    return noise
 
 
 def simulate_current_waveforms(

@@ -36,12 +36,16 @@ class Stops:
     fired: np.ndarray
 
 
-def _sample_crossings(y, thr):
+def _sample_crossings(y, thr, candidates=None):
     """Upward crossings of ``thr`` between consecutive samples (not at column 0).
 
+    candidates : flat indices of y that include every sample at or above thr (sorted), or None
     Returns row, j (first sample at or above thr), t_a in samples (interpolated)."""
     n, length = y.shape
-    flat = np.flatnonzero(y >= thr)
+    if candidates is None:
+        flat = np.flatnonzero(y >= thr)
+    else:
+        flat = candidates[y.reshape(-1)[candidates] >= thr]
     col = flat % length
     prev_above = np.zeros(len(flat), dtype=bool)
     prev_above[1:] = flat[1:] - 1 == flat[:-1]
@@ -53,7 +57,7 @@ def _sample_crossings(y, thr):
     return idx // length, j, (j - 1) + (thr - y0) / (y1 - y0)
 
 
-def _refined_crossings(y, thr, x_padded, band: BandLimit, n_sub: int):
+def _refined_crossings(y, thr, x_padded, band: BandLimit, n_sub: int, candidates=None):
     """Excursions above ``thr`` that start and end between two samples both below it.
 
     Between samples j and j+1 the curve rises above their chord by at most dt^2 / 8 max|y''|. For
@@ -68,10 +72,17 @@ def _refined_crossings(y, thr, x_padded, band: BandLimit, n_sub: int):
     at q dt / n_sub from the input samples. The tests check that this pre-selection finds the
     same crossings as evaluating every pair within the margin.
 
+    candidates : flat indices of y that include every sample at or above (1 - ARMING_MARGIN) thr
+    (sorted), or None.
+
     Returns row, j (first sample after the excursion's start), t_a in samples.
     """
     n, length = y.shape
-    near = np.flatnonzero((y >= (1.0 - ARMING_MARGIN) * thr) & (y < thr))
+    if candidates is None:
+        near = np.flatnonzero((y >= (1.0 - ARMING_MARGIN) * thr) & (y < thr))
+    else:
+        v = y.reshape(-1)[candidates]
+        near = candidates[(v >= (1.0 - ARMING_MARGIN) * thr) & (v < thr)]
     if len(near) == 0:
         e = np.zeros(0, dtype=np.int64)
         return e, e, np.zeros(0)
@@ -328,9 +339,14 @@ def discriminate(
     if y.ndim != 2:
         raise ValueError(f"y_a must be (n, L), got shape {y.shape}")
     thr = float(threshold_a)
-    row, j, t_a = _sample_crossings(y, thr)
+    continuous = x_padded_a is not None and band is not None
+    # one pass over y: the samples the comparators can need (near or above V_T)
+    candidates = np.flatnonzero(y >= min(thr, (1.0 - ARMING_MARGIN) * thr if continuous else thr))
+    row, j, t_a = _sample_crossings(y, thr, candidates)
     if x_padded_a is not None and band is not None:
-        r2, j2, t2 = _refined_crossings(y, thr, np.asarray(x_padded_a), band, ARMING_REFINE)
+        r2, j2, t2 = _refined_crossings(
+            y, thr, np.asarray(x_padded_a), band, ARMING_REFINE, candidates
+        )
         row, j, t_a = np.concatenate([row, r2]), np.concatenate([j, j2]), np.concatenate([t_a, t2])
         order = np.lexsort((t_a, row))
         row, j, t_a = row[order], j[order], t_a[order]

@@ -6,7 +6,6 @@ Eq. 26."""
 from __future__ import annotations
 
 import math
-import os
 import sys
 import time
 from collections.abc import Callable
@@ -16,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from .... import parallel
 from ....constants import C
 from ....echo.features import compiled_kernel
 from ....pulse import PulseShape
@@ -24,7 +24,6 @@ from ..detection import Outliers
 from .currents import BandLimit, band_limit, noisy_band_limited
 from .discriminator import batches, discriminate, pulse_fwhm_s, raw_end_s, reference_stop_s
 
-_THREADS = max(1, min(2, os.cpu_count() or 1))
 _DEFAULT_MAX_BYTES = 64 << 20  # working set per worker thread [bytes]
 _BYTES_PER_SAMPLE = 36  # float32 input, output, FFT buffers and masks per sample of a chunk
 PROGRESS_DELAY_S = 2.0  # a frame running longer shows a progress bar on a terminal [s]
@@ -104,6 +103,7 @@ class _GateSetup:
     # the range gate [m]: the TDC records stops from the time a surface at its near edge gives
     # (its opening plus t_ref) and counts no time before its opening (Eq. 26's quantisation)
     gate_m: tuple[float, float] = (0.0, math.inf)
+    key: int = 0  # the flash's 64-bit noise key: pixel p draws its white noise from stream p
 
 
 def _signal_into(x: np.ndarray, setup: _GateSetup, lit: np.ndarray, local_rows: np.ndarray):
@@ -189,6 +189,8 @@ def _gate_chunk(setup: _GateSetup, p0: int, p1: int, rng: np.random.Generator):
         add_signal=False,
         row_scale=scale,
         photon=setup.photon,
+        stream0=p0,
+        key=setup.key,
     )
     _filtered_signal_into(y, setup, lit[local], local)
     if scale is not None and setup.per_pixel_threshold:
@@ -277,7 +279,7 @@ def montecarlo_gate(
     noise: bool = True,
     arming: str = "continuous",
     max_bytes: int = _DEFAULT_MAX_BYTES,
-    n_threads: int = _THREADS,
+    n_threads: int | None = None,
     background_a=None,
     per_pixel_threshold: bool = False,
     photon: Any = None,
@@ -287,7 +289,8 @@ def montecarlo_gate(
 
     Parameters
     ----------
-    rng : numpy.random.Generator -- children are spawned from it, one per chunk of pixels
+    rng : numpy.random.Generator -- the flash's noise key is drawn from it (each pixel's white
+        noise from its own stream under it), then children are spawned, one per chunk of pixels
     pixel : (n,) int -- flat index of each echo pixel, in [0, n_pixels_total)
     arrivals_s, weights_per_j : (n, K) float -- Eq. 29-30 two-way delays [s] and weights (per
         joule of pulse energy: P_r(t) = E sum_k w_k P0(t - t_k)); weight 0 = no element
@@ -307,7 +310,8 @@ def montecarlo_gate(
     noise : bool -- False: noise-free waveforms through the same discriminator
     arming : "continuous" (an analog comparator) or "sampled" (crossings between samples only)
     max_bytes : int -- working set per worker thread [bytes]
-    n_threads : int -- worker threads (numpy and scipy.fft release the GIL)
+    n_threads : int, optional -- worker threads (the noise kernel, numpy and scipy.fft release
+        the GIL); None: the frame's threads (:func:`simcore.parallel.threads`)
     background_a : (n_pixels_total,) float, optional -- each pixel's background current at the
         APD output, R_resp P_bg [A]: its shot noise joins the pixel's white noise
         (docs/physics.md#background-noise); its DC level is removed (AC coupling)
@@ -372,6 +376,7 @@ def montecarlo_gate(
         per_pixel_threshold=bool(per_pixel_threshold),
         photon=photon,
         gate_m=(max(0.0, gate_center_m - 0.5 * gate_m), gate_center_m + 0.5 * gate_m),
+        key=int(rng.integers(1 << 63)),
     )
     rows = max(1, int(max_bytes) // (_BYTES_PER_SAMPLE * (n_samples + 2 * band.half_width)))
     bounds = [(p, min(p + rows, n_pixels_total)) for p in range(0, n_pixels_total, rows)]
@@ -396,6 +401,7 @@ def montecarlo_gate(
         delay=PROGRESS_DELAY_S,
         leave=False,
     )
+    n_threads = parallel.threads() if n_threads is None else int(n_threads)
     with bar, ThreadPoolExecutor(max_workers=max(1, min(n_threads, len(jobs)))) as pool:
         for (p0, p1, _), (out, (tw, td)) in zip(jobs, pool.map(work, jobs), strict=True):
             parts.append(out)

@@ -1,11 +1,19 @@
 """``lmapd bench``: the stage timings on the MRO (``stages``), with ``--tradeoff`` each fidelity
 preset's time against its error (``tradeoff``), with ``--startup`` the phases of ``lmapd simulate``
-in fresh processes (``startup``), with ``--design`` a design study's wall time (``design``).
+in fresh processes (``startup``), with ``--design`` a design study's wall time (``design``), with
+``--kernel`` the compiled echo kernel against the numpy path in fresh processes (``kernel``), with
+``--sweep`` a sweep's wall time on Dask clusters of 1 and 2 workers (``sweep``).
 
     lmapd bench [--quick] [--json FILE] [--tradeoff --out DIR [--pixels N] | --startup |
-                --design [--trials N] [--workers N]]
+                --design [--trials N] [--workers N] |
+                --kernel [--rounds N] [--repeats N] [--before DIR] |
+                --sweep [--frames N] [--pixels N] [--workers N ...] [--backends B ...]
+                        [--repeats N]]
 
 The modules load the imaging chain; they are imported when the command runs, not at ``--help``.
+The benchmarks that need a browser or a served app stay scripts (``scripts/bench_app.py``,
+``bench_sessions.py``, ``bench_session_memory.py``, ``soak_app.py``): they drive the app through
+the test suite's browser and server helpers.
 """
 
 from __future__ import annotations
@@ -38,15 +46,54 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
         help="the built-in design study's wall time (200 trials x 8 envelope points at "
         "128 x 128; 20 trials with --quick) and its stage reuse",
     )
+    bench.add_argument(
+        "--kernel",
+        action="store_true",
+        help="the compiled echo kernel against the numpy path (LMAPD_NO_NUMBA=1), fresh "
+        "processes in turn (median and range over the rounds)",
+    )
+    bench.add_argument(
+        "--sweep",
+        action="store_true",
+        help="a sweep's wall time on Dask clusters of 1 and 2 workers (the best of the rounds)",
+    )
     bench.add_argument("--trials", type=int, help="designs to screen for --design")
     bench.add_argument(
-        "--workers", type=int, default=2, help="Dask workers for --design (default 2)"
+        "--workers",
+        type=int,
+        nargs="+",
+        help="Dask workers: one count for --design (default 2), the counts to compare for "
+        "--sweep (default 1 2)",
     )
     bench.add_argument("--out", help="folder for tradeoff.json and tradeoff.png")
     bench.add_argument(
         "--pixels",
         type=int,
-        help="array size per side for --tradeoff (default 256, the paper's; 128 with --quick)",
+        help="array size per side for --tradeoff (default 256, the paper's; 128 with --quick) "
+        "and --sweep (default 128; 32 with --quick)",
+    )
+    bench.add_argument(
+        "--rounds", type=int, help="rounds of fresh processes for --kernel (default 3; 1 quick)"
+    )
+    bench.add_argument(
+        "--repeats",
+        type=int,
+        help="warm frames a process for --kernel (default 7; 3 quick), timed rounds for --sweep "
+        "(default 3; 1 quick)",
+    )
+    bench.add_argument(
+        "--before",
+        metavar="DIR",
+        help="for --kernel: also time the code in DIR (an older checkout, first on PYTHONPATH)",
+    )
+    bench.add_argument(
+        "--frames", type=int, help="frames of the sweep for --sweep (default 200; 20 quick)"
+    )
+    bench.add_argument(
+        "--backends",
+        nargs="+",
+        choices=("kernel", "numpy"),
+        help="echo backends for --sweep, one cluster each (default kernel)",
     )
     bench.set_defaults(func=run_cli)
     return bench
@@ -54,32 +101,81 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
 
 def run_cli(args: argparse.Namespace) -> int:
     """Run ``lmapd bench``; the exit status (0). User errors raise CliError."""
-    if sum((args.tradeoff, args.startup, args.design)) > 1:
-        raise CliError("--tradeoff, --startup and --design are three benches: run one at a time")
+    modes = {
+        "--tradeoff": args.tradeoff,
+        "--startup": args.startup,
+        "--design": args.design,
+        "--kernel": args.kernel,
+        "--sweep": args.sweep,
+    }
+    chosen = [name for name, on in modes.items() if on]
+    if len(chosen) > 1:
+        raise CliError(f"{' and '.join(chosen)} are separate benches: run one at a time")
+    _check_options(args, chosen[0] if chosen else None)
     if args.design:
-        if args.trials is not None and args.trials < 1:
-            raise CliError(f"--trials {args.trials}: give at least 1")
-        if args.workers < 0:
-            raise CliError(f"--workers {args.workers}: give a number >= 0")
+        workers = args.workers[0] if args.workers else 2
         from . import design  # noqa: PLC0415  (the imaging chain, optuna, Dask)
 
-        return design.main(args.quick, args.json, args.trials, args.workers)
-    if args.trials is not None:
-        raise CliError("--trials is for --design")
+        return design.main(args.quick, args.json, args.trials, workers)
+    if args.kernel:
+        from . import kernel  # noqa: PLC0415  (starts fresh processes)
+
+        rounds = args.rounds or (1 if args.quick else 3)
+        repeats = args.repeats or (3 if args.quick else 7)
+        return kernel.main(rounds, repeats, args.json, args.before)
+    if args.sweep:
+        from . import sweep  # noqa: PLC0415  (the imaging chain, Dask)
+
+        return sweep.main(
+            frames=args.frames or (20 if args.quick else 200),
+            pixels=args.pixels or (32 if args.quick else 128),
+            workers=tuple(args.workers or (1, 2)),
+            backends=tuple(args.backends or ("kernel",)),
+            repeats=args.repeats or (1 if args.quick else 3),
+            json_path=args.json,
+        )
     if args.startup:
-        if args.pixels is not None or args.out:
-            raise CliError("--startup runs the paper scene: it takes no --pixels or --out")
         from . import startup  # noqa: PLC0415
 
         return startup.main(quick=args.quick, json_path=args.json)
     if args.tradeoff:
-        if not args.out:
-            raise CliError("--tradeoff needs --out DIR")
         from . import tradeoff  # noqa: PLC0415  (the imaging chain)
 
         return tradeoff.main(args.out, quick=args.quick, pixels=args.pixels)
-    if args.pixels is not None:
-        raise CliError("--pixels is for --tradeoff (the stage bench runs its own sizes)")
     from . import stages  # noqa: PLC0415
 
     return stages.main(quick=args.quick, json_path=args.json)
+
+
+# the options each bench takes (besides --quick and --json): any other is refused, naming them
+OPTIONS = {
+    None: (),
+    "--tradeoff": ("out", "pixels"),
+    "--startup": (),
+    "--design": ("trials", "workers"),
+    "--kernel": ("rounds", "repeats", "before"),
+    "--sweep": ("frames", "pixels", "workers", "backends", "repeats"),
+}
+
+
+def _check_options(args: argparse.Namespace, mode: str | None) -> None:
+    """Refuse an option the chosen bench does not take, and counts below their floor."""
+    for option in ("out", "pixels", "trials", "workers", "rounds", "repeats", "before"):
+        if getattr(args, option) is not None and option not in OPTIONS[mode]:
+            takers = [m for m, names in OPTIONS.items() if m and option in names]
+            what = "the stage bench" if mode is None else mode
+            raise CliError(f"{what} takes no --{option} (it is for {' and '.join(takers)})")
+    for option in ("frames", "backends"):
+        if getattr(args, option) is not None and option not in OPTIONS[mode]:
+            raise CliError(f"--{option} is for --sweep")
+    if mode == "--tradeoff" and not args.out:
+        raise CliError("--tradeoff needs --out DIR")
+    if mode == "--design" and args.workers is not None and len(args.workers) != 1:
+        raise CliError("--design runs on one number of --workers")
+    floors = {"trials": 1, "rounds": 1, "repeats": 1, "frames": 1}  # pixels: the scene checks
+    for option, floor in floors.items():
+        value = getattr(args, option)
+        if value is not None and value < floor:
+            raise CliError(f"--{option} {value}: give at least {floor}")
+    if args.workers is not None and min(args.workers) < (0 if mode == "--design" else 1):
+        raise CliError(f"--workers {' '.join(map(str, args.workers))}: give counts of workers")

@@ -1,27 +1,27 @@
-"""Benchmark: the compiled echo kernel (A) against the numpy path (B, ``LMAPD_NO_NUMBA=1``), in
-fresh processes taken in turn, so that a busy spell of a shared machine slows both; prints figures.
+"""``lmapd bench --kernel``: the compiled echo kernel (A) against the numpy path (B,
+``LMAPD_NO_NUMBA=1``), in fresh processes taken in turn, so that a busy spell of a shared machine
+slows both; prints figures (never asserted).
 
-    .venv/bin/python scripts/bench_kernel.py [--rounds 3] [--repeats 7] [--json FILE]
+    lmapd bench --kernel [--rounds 3] [--repeats 7] [--before DIR] [--json FILE] [--quick]
 
 Each round runs, for A then B, two fresh processes on the paper scene (the MRO):
 
 - ``default``: the first frame of a 256 x 256 x 4 run, as ``lmapd simulate`` computes it (the
   stages after the target: rays, hits, echo, background, receiver, detection, cloud; the kernel
-  loads on a background thread meanwhile, as in ``Pipeline.run``), then ``--repeats`` warm frames
+  loads on a background thread meanwhile, as in ``Pipeline.run``), then ``repeats`` warm frames
   at 256 x 256 x 4 and at 512 x 512 x 4 (the pose nudged between frames, so that every stage after
   the rays re-runs), each followed by the ray cast alone of the same sub-rays (the floor);
 - ``reference``: the same for the ``reference`` preset at 256 x 256 (64 sub-rays per pixel).
 
 A process reports the median of its warm frames (frame, echo stage, ray cast, frame / ray cast);
 the table gives, for each figure, the median over the rounds and its range (min-max), and the
-ratio B / A round by round. With ``--before DIR`` a third process runs each time, on the code in
-DIR (an older checkout, put first on PYTHONPATH): the speed-up against it. The load average is
-printed before and after: other processes take cores from the frames.
+ratio B / A round by round. With ``before`` (a folder: an older checkout, put first on
+PYTHONPATH) a third process runs each time, on the code in it: the speed-up against it. The load
+average is printed before and after: other processes take cores from the frames.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import statistics
@@ -122,28 +122,24 @@ def ratios(a: list[float], b: list[float]) -> list[float]:
     return [y / x for x, y in zip(a, b, strict=True)]
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--rounds", type=int, default=3)
-    parser.add_argument("--repeats", type=int, default=7)
-    parser.add_argument("--json", help="also write the figures to this JSON file")
-    parser.add_argument(
-        "--before", help="also time the code in this folder (an older checkout: PYTHONPATH)"
-    )
-    args = parser.parse_args(argv)
+def main(
+    rounds: int = 3, repeats: int = 7, json_path: str | None = None, before: str | None = None
+) -> int:
+    """Run ``rounds`` rounds of fresh processes (``repeats`` warm frames each) for A, B (and the
+    code in ``before``); print the tables and optionally write the figures to ``json_path``."""
     backends = dict(BACKENDS)
-    if args.before:
-        backends[BEFORE] = {"PYTHONPATH": str(Path(args.before).resolve())}
+    if before:
+        backends[BEFORE] = {"PYTHONPATH": str(Path(before).resolve())}
         probe("default", 1, backends[BEFORE])  # its on-disk caches filled before the clock
 
     load_before = os.getloadavg()
     print(f"{os.cpu_count()} cores; load average {load_before[0]:.2f}", file=sys.stderr)
     runs: dict[str, dict[str, list[dict]]] = {b: {"default": [], "reference": []} for b in backends}
-    for r in range(args.rounds):
+    for r in range(rounds):
         for which in ("default", "reference"):
             for backend, env in backends.items():
-                runs[backend][which].append(probe(which, args.repeats, env))
-        print(f"round {r + 1}/{args.rounds} done", file=sys.stderr)
+                runs[backend][which].append(probe(which, repeats, env))
+        print(f"round {r + 1}/{rounds} done", file=sys.stderr)
     load_after = os.getloadavg()
 
     def series(backend, which, name, key):
@@ -156,8 +152,8 @@ def main(argv: list[str] | None = None) -> int:
     ]
     a, b = BACKENDS
     print(
-        f"{args.rounds} rounds of fresh processes (A, B in turn); each process the median of "
-        f"{args.repeats} warm frames; median (min-max) over the rounds [ms]"
+        f"{rounds} rounds of fresh processes (A, B in turn); each process the median of "
+        f"{repeats} warm frames; median (min-max) over the rounds [ms]"
     )
     print(
         "| frame | A: frame / echo / ray cast (ms) | A: frame / ray cast | "
@@ -176,9 +172,9 @@ def main(argv: list[str] | None = None) -> int:
             f"{spread(series(b, which, name, 'echo_s'))} | "
             f"{spread(ratio_echo, 1, '.1f')}x, {spread(ratio_frame, 1, '.1f')}x |"
         )
-    if args.before:
+    if before:
         print()
-        print(f"{BEFORE} ({args.before}): frame / echo (ms), and before / A: echo, frame")
+        print(f"{BEFORE} ({before}): frame / echo (ms), and before / A: echo, frame")
         for which, name in rows:
             c = BEFORE
             echo = ratios(series(a, which, name, "echo_s"), series(c, which, name, "echo_s"))
@@ -203,18 +199,14 @@ def main(argv: list[str] | None = None) -> int:
                 f"{spread([c / w for c, w in zip(cold, warm, strict=True)], 1, '.2f')} |"
             )
     print(f"load average before {load_before[0]:.2f}, after {load_after[0]:.2f}")
-    if args.json:
+    if json_path:
         record = {
-            "rounds": args.rounds,
-            "repeats": args.repeats,
+            "rounds": rounds,
+            "repeats": repeats,
             "cores": os.cpu_count(),
             "load_before": load_before,
             "load_after": load_after,
             "runs": runs,
         }
-        Path(args.json).write_text(json.dumps(record, indent=2) + "\n", encoding="utf-8")
+        Path(json_path).write_text(json.dumps(record, indent=2) + "\n", encoding="utf-8")
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -1,7 +1,8 @@
-"""Benchmark: the same sweep on a Dask LocalCluster of 1 worker, then of 2 workers; prints figures.
+"""``lmapd bench --sweep``: the same sweep on a Dask LocalCluster of 1 worker, then of 2 workers;
+prints figures (never asserted).
 
-    .venv/bin/python scripts/bench_sweep.py [--frames 200] [--pixels 128] [--workers 1 2]
-                                            [--backends kernel numpy] [--repeats 3] [--json FILE]
+    lmapd bench --sweep [--frames 200] [--pixels 128] [--workers 1 2] [--backends kernel numpy]
+                        [--repeats 3] [--json FILE] [--quick]
 
 The sweep: the paper scene at PIXELS x PIXELS (4 sub-rays, the default fidelity), a grid of
 pitch x azimuth giving FRAMES frames (200 = 20 pitches x 10 azimuths), no point clouds.
@@ -11,12 +12,12 @@ done to the Parquet table written, into a fresh folder each time. Excluded (the 
 cluster start (worker processes importing simcore) and one frame on every worker before the
 clock starts (``sweep.warm_workers``), which loads the MRO mesh and builds its BVH there, the
 cost paid once per worker. Both clusters are started and warmed first and stay up (idle workers
-cost nothing); with --repeats N the configurations then run in turn, N rounds, and each one's
+cost nothing); with ``repeats`` N the configurations then run in turn, N rounds, and each one's
 fastest run counts (all are printed): on a shared machine the fastest run is the one least
 disturbed by other processes (the median and range of the runs are printed too). The load
 average is printed before and after, since other processes take cores from the workers.
 
-With ``--backends kernel numpy`` every worker count gets two clusters: one whose workers compute
+With the backends ``kernel numpy`` every worker count gets two clusters: one whose workers compute
 the echo features with the compiled kernel (the default) and one whose workers have
 ``LMAPD_NO_NUMBA=1`` (the numpy path); each cluster's workers are asked which one they use.
 
@@ -27,7 +28,6 @@ timed on the worker).
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import json
 import logging
@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from simcore.sweep import build_sweep, run_sweep, warm_workers
+from ...sweep import build_sweep, run_sweep, warm_workers
 
 _QUIET_LOAD = 0.5  # [-] 1-minute load average above which other processes take cores
 
@@ -64,7 +64,7 @@ BACKEND_ENV = {"kernel": {}, "numpy": {"LMAPD_NO_NUMBA": "1"}}
 def echo_backend() -> str:
     """On a worker: "kernel" if its echo features use the compiled kernel, else "numpy"."""
     try:
-        from simcore.echo.features import compiled_kernel
+        from simcore.echo.features import compiled_kernel  # noqa: PLC0415  (on the worker)
     except ImportError:  # code from before the kernel (a baseline on PYTHONPATH)
         return "numpy"
     return "kernel" if compiled_kernel() is not None else "numpy"
@@ -73,7 +73,7 @@ def echo_backend() -> str:
 def start_cluster(stack: contextlib.ExitStack, n_workers: int, scene, backend: str) -> dict:
     """A LocalCluster of ``n_workers`` single-threaded processes with the echo ``backend``
     ("kernel" or "numpy"), warmed with ``scene``."""
-    from distributed import Client, LocalCluster
+    from distributed import Client, LocalCluster  # noqa: PLC0415  (Dask: for this bench only)
 
     t0 = time.perf_counter()
     cluster = stack.enter_context(
@@ -131,32 +131,31 @@ def figures(run: dict) -> dict:
     }
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--frames", type=int, default=200)
-    parser.add_argument("--pixels", type=int, default=128)
-    parser.add_argument("--workers", type=int, nargs="+", default=[1, 2])
-    parser.add_argument("--backends", nargs="+", choices=sorted(BACKEND_ENV), default=["kernel"])
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--json", help="also write the figures to this JSON file")
-    args = parser.parse_args(argv)
-
-    sweep = bench_sweep(args.frames, args.pixels)
+def main(
+    frames: int = 200,
+    pixels: int = 128,
+    workers: tuple[int, ...] = (1, 2),
+    backends: tuple[str, ...] = ("kernel",),
+    repeats: int = 3,
+    json_path: str | None = None,
+) -> int:
+    """Time the sweep of ``frames`` frames at ``pixels`` per side on a warm cluster of each
+    worker count and echo backend, ``repeats`` rounds in turn; print the figures and optionally
+    write them to ``json_path``."""
+    sweep = bench_sweep(frames, pixels)
     n = len(sweep)
     load_before = os.getloadavg()
     print(
-        f"sweep: {n} frames at {args.pixels} x {args.pixels} pixels, "
+        f"sweep: {n} frames at {pixels} x {pixels} pixels, "
         f"{sweep.frames[0].scene.fidelity.subrays} sub-rays; {os.cpu_count()} cores; "
         f"load average {load_before[0]:.2f}",
         file=sys.stderr,
     )
     with contextlib.ExitStack() as stack:  # every cluster up and warm before the first clock
         clusters = [
-            start_cluster(stack, w, sweep.frames[0].scene, b)
-            for w in args.workers
-            for b in args.backends
+            start_cluster(stack, w, sweep.frames[0].scene, b) for w in workers for b in backends
         ]
-        for _ in range(args.repeats):  # interleaved, so a busy spell hits every configuration
+        for _ in range(repeats):  # interleaved, so a busy spell hits every configuration
             for run in clusters:
                 time_sweep(sweep, run)
     runs = [figures(run) for run in clusters]
@@ -170,18 +169,18 @@ def main(argv: list[str] | None = None) -> int:
             f"{', '.join(f'{x:.2f}' for x in r['wall_s_all'])} s; "
             f"cluster start {r['cluster_start_s']:.1f} s, warm-up {r['warm_up_s']:.1f} s)"
         )
-    for b in args.backends:
+    for b in backends:
         same = [r for r in runs if r["backend"] == b]
         for r in same[1:]:
             print(
                 f"speed-up {r['workers']} vs {same[0]['workers']} workers ({b}): "
                 f"{same[0]['wall_s'] / r['wall_s']:.2f} x"
             )
-    if len(args.backends) > 1:
-        for w in args.workers:
+    if len(backends) > 1:
+        for w in workers:
             by = {r["backend"]: r for r in runs if r["workers"] == w}
-            k, n = by["kernel"]["wall_s_all"], by["numpy"]["wall_s_all"]
-            pairs = sorted(y / x for x, y in zip(k, n, strict=True))
+            k_all, n_all = by["kernel"]["wall_s_all"], by["numpy"]["wall_s_all"]
+            pairs = sorted(y / x for x, y in zip(k_all, n_all, strict=True))
             print(
                 f"numpy / kernel on {w} worker{'s' if w > 1 else ''}: fastest runs "
                 f"{by['numpy']['wall_s'] / by['kernel']['wall_s']:.2f} x, round by round "
@@ -194,18 +193,14 @@ def main(argv: list[str] | None = None) -> int:
             "note: other processes were using the cores; the 2-worker figures are then too slow",
             file=sys.stderr,
         )
-    if args.json:
+    if json_path:
         record = {
             "frames": n,
-            "pixels": args.pixels,
+            "pixels": pixels,
             "cores": os.cpu_count(),
             "load_before": load_before,
             "load_after": load_after,
             "runs": runs,
         }
-        Path(args.json).write_text(json.dumps(record, indent=2) + "\n", encoding="utf-8")
+        Path(json_path).write_text(json.dumps(record, indent=2) + "\n", encoding="utf-8")
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -22,7 +22,7 @@ from .geometry import HITS, RAYS, TARGET
 from .pointcloud import CLOUD
 from .pulse import scene_pulse_shape
 from .quality import QUALITY
-from .receivers import DETECTION, RECEIVER
+from .receivers.stages import DETECTION, RECEIVER
 from .result import Result, Waveform
 from .scene import Scene, SceneError, with_overrides
 from .stage import _SHOULD_STOP, Cancelled, Stage, stop_check

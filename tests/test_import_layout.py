@@ -281,7 +281,22 @@ SIMCORE_FLOORS = (
 )
 
 
+# modules placed by their exact name, not as a package with everything under it: the receivers'
+# registry and their declarations (each receiver's package names its section and its steps, by
+# name), which the scene reads for the valid kinds and the receivers' sections, sit on the
+# scene's floor; each receiver's physics stays on the chain's floor
+SIMCORE_EXACT = {
+    "simcore.receivers": 1,
+    "simcore.receivers.declaration": 1,
+    "simcore.receivers.lm_apd": 1,
+    "simcore.receivers.gm_apd": 1,
+    "simcore.receivers.gm_apd.section": 1,
+}
+
+
 def simcore_floor(name: str) -> int:
+    if name in SIMCORE_EXACT:
+        return SIMCORE_EXACT[name]
     for level, prefixes in enumerate(SIMCORE_FLOORS):
         if any(name == p or name.startswith(p + ".") for p in prefixes if p != "simcore"):
             return level

@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import field
+from typing import Any
 
 from ..errors import SceneError
 
@@ -93,6 +94,11 @@ def to_plain(obj, inf_as_text: bool = True):
     if dataclasses.is_dataclass(obj):
         out = {}
         for f in dataclasses.fields(obj):
+            if f.name == "receiver_sections":  # a scene's receivers' own: each its own table
+                scene: Any = obj  # a SceneKeys (this module does not import it)
+                for name, section in scene.receiver_section_items():
+                    out[name] = to_plain(section, inf_as_text)
+                continue
             v = getattr(obj, f.name)
             out[f.name] = dict(v) if f.name == "materials" else to_plain(v, inf_as_text)
         return out

@@ -11,12 +11,12 @@ from .fields import choices_of, key, range_text, to_plain
 from .presets import PRESETS
 from .sections import (
     PAPER_FORMS,
+    RECEIVER_SECTIONS,
     SECTIONS,
     Amplifiers,
     Background,
     Detector,
     Fidelity,
-    GeigerMode,
     Laser,
     Orbit,
     Pose,
@@ -70,8 +70,23 @@ class SceneKeys:
     sun: Sun = field(default_factory=Sun)
     orbit: Orbit = field(default_factory=Orbit)
     background: Background = field(default_factory=Background)
-    gm: GeigerMode = field(default_factory=GeigerMode)
+    # the receivers' own sections (``[gm]``: ``simcore.receivers``), those set to other than
+    # their defaults as (name, keys) pairs in name order; read as attributes (``scene.gm``)
+    receiver_sections: tuple[tuple[str, Any], ...] = ()
     quality: Quality = field(default_factory=Quality)
+
+    def __getattr__(self, name: str) -> Any:
+        """A receiver's section (``scene.gm``): its keys as set, else its defaults."""
+        if name.startswith("__") or name == "receiver_sections":
+            raise AttributeError(name)  # copying and unpickling probe before the fields exist
+        cls = RECEIVER_SECTIONS().get(name)
+        if cls is None:
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        return dict(self.receiver_sections).get(name) or cls()
+
+    def receiver_section_items(self) -> list[tuple[str, Any]]:
+        """Every receiver's section, (name, keys), in the order of the key reference."""
+        return [(name, getattr(self, name)) for name in RECEIVER_SECTIONS()]
 
     def uses(self, form: str) -> bool:
         """True if the paper's literal form ``form`` (one of PAPER_FORMS) is in force."""
@@ -102,6 +117,15 @@ class SceneKeys:
         only for a receiver other than the default lm_apd: LM-APD scenes read as before the key
         existed)."""
         return to_plain(self)
+
+
+def with_receiver_section(receiver_sections: tuple, name: str, keys: Any) -> tuple:
+    """``receiver_sections`` (a scene's) with the section ``name`` set to ``keys`` (left out
+    where they are its defaults, so that equal scenes compare equal)."""
+    rest = {n: v for n, v in receiver_sections if n != name}
+    if keys != type(keys)():
+        rest[name] = keys
+    return tuple(sorted(rest.items()))
 
 
 def key_reference() -> list[dict[str, str]]:

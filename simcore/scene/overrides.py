@@ -10,9 +10,10 @@ import tomllib
 from typing import Any
 
 from ..errors import SceneError
+from .keys import with_receiver_section
 from .model import Scene
 from .presets import PRESETS
-from .sections import QUICK, SECTIONS
+from .sections import QUICK, RECEIVER_SECTIONS, SECTIONS
 
 
 def _coerce(key: str, f: dataclasses.Field, value):
@@ -112,7 +113,11 @@ def with_overrides(scene: Scene, overrides: dict[str, Any] | None = None, **quic
                 raise _unknown(key)
             sections.setdefault(section, {})[name] = _coerce(dotted, fields[name], value)
         else:
-            fields = {f.name: f for f in dataclasses.fields(Scene) if f.name not in SECTIONS}
+            fields = {
+                f.name: f
+                for f in dataclasses.fields(Scene)
+                if f.name not in SECTIONS and f.name != "receiver_sections"
+            }
             if dotted not in fields:
                 raise _unknown(key)
             f = fields[dotted]
@@ -120,8 +125,14 @@ def with_overrides(scene: Scene, overrides: dict[str, Any] | None = None, **quic
                 top[dotted] = str(value)
             else:
                 top[dotted] = _coerce(dotted, f, value)
+    own = RECEIVER_SECTIONS()
     for section, changes in sections.items():
-        top[section] = dataclasses.replace(getattr(scene, section), **changes)
+        keys = dataclasses.replace(getattr(scene, section), **changes)
+        if section in own:  # a receiver's section
+            held = top.get("receiver_sections", scene.receiver_sections)
+            top["receiver_sections"] = with_receiver_section(held, section, keys)
+        else:
+            top[section] = keys
     return dataclasses.replace(scene, **top)
 
 

@@ -11,8 +11,10 @@ leaves out (docs/physics.md#table-4).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 
+from .. import receivers
 from .fields import key
 
 
@@ -270,75 +272,6 @@ class Fidelity:
     )
 
 
-# The most pulses one Geiger-mode frame may accumulate: 10^4 pulses of a 256 x 256 array are
-# 6.6e8 pixel-pulses (minutes on two cores); more is a different instrument (a long dwell).
-MAX_GM_PULSES = 10_000
-
-
-@dataclass(frozen=True)
-class GeigerMode:
-    pde: float = key(
-        0.3,
-        "1",
-        0.0,
-        1.0,
-        "Geiger-mode photon detection efficiency (InGaAs GM-APD at 1064 nm)",
-        lo_open=True,
-    )
-    dark_count_rate_hz: float = key(
-        10e3, "Hz", 0.0, 1e9, "Geiger-mode dark count rate per pixel (armed)"
-    )
-    dead_time_s: float = key(
-        1e-6,
-        "s",
-        0.0,
-        1.0,
-        "Geiger-mode dead time after each avalanche: non-paralysable, re-armed at each gate "
-        "opening (longer than the gate: first photon only)",
-    )
-    jitter_s: float = key(
-        200e-12, "s", 0.0, 1e-6, "Geiger-mode timing jitter (rms, Gaussian)", lo_open=True
-    )
-    bin_s: float = key(
-        250e-12,
-        "s",
-        0.0,
-        10e-9,
-        "Geiger-mode TDC bin width of the histogram (a coarse TDC: at most 10 ns, 1.5 m)",
-        lo_open=True,
-    )
-    pulses: int = key(
-        100, "1", 1, MAX_GM_PULSES, "Geiger-mode pulses per frame, histogrammed per pixel"
-    )
-    crosstalk: float = key(
-        0.0, "1", 0.0, 0.5, "Geiger-mode crosstalk: chance an avalanche fires a 4-neighbour"
-    )
-    afterpulsing: float = key(
-        0.0, "1", 0.0, 0.5, "Geiger-mode afterpulsing: chance an avalanche fires again on re-arm"
-    )
-    coates: bool = key(
-        True, "-", doc="Geiger-mode range from the Coates-corrected histogram (false: raw counts)"
-    )
-    attenuation_db: float = key(
-        50.0,
-        "dB",
-        0.0,
-        200.0,
-        "Geiger-mode transmit attenuation: the frame's pulses carry laser.pulse_energy_j x "
-        "10^(-attenuation_db / 10) (50 dB: the paper's 5 mJ becomes 50 nJ, under one "
-        "photoelectron per pixel per pulse on the paper scene, where single-photon receivers "
-        "operate; 0: the full pulse, piled up)",
-    )
-    pileup_correction: str = key(
-        "none",
-        "-",
-        doc="Geiger-mode first-photon (pile-up) correction: none (the centroid of the "
-        "histogram) or fit (the first-photon model fitted to each pixel's first avalanches "
-        "per armed pulse: echo start and photoelectrons per pulse)",
-        choices=("none", "fit"),
-    )
-
-
 EARTH_RADIUS_M = 6378137.0  # [m] WGS84 semi-major axis (= orbit.R_EARTH_M)
 TABLE3_ALTITUDE_M = 7073.22e3 - EARTH_RADIUS_M  # [m] Table 3's target: a - R_E, 695 km
 
@@ -417,16 +350,9 @@ class Background:
     )
 
 
-# The valid values of ``receiver.kind``: the built-in receivers (``simcore.receivers.BUILT_IN``
-# names the module of each), then those a module registers (``simcore.receivers.register`` adds
-# them here). The scene holds only the names, so it depends on no receiver.
-DEFAULT_RECEIVER = "lm_apd"
-RECEIVER_KINDS: list[str] = [DEFAULT_RECEIVER, "gm_apd"]
-
-
-def receiver_kinds() -> tuple[str, ...]:
-    """The valid values of ``receiver.kind``: the built-in receivers, then the registered ones."""
-    return tuple(RECEIVER_KINDS)
+# The valid values of ``receiver.kind`` are the receivers' registry's (``simcore.receivers``, which
+# loads only the standard library until a receiver runs): the scene holds only the names.
+DEFAULT_RECEIVER = receivers.DEFAULT_KIND
 
 
 @dataclass(frozen=True)
@@ -436,7 +362,7 @@ class ReceiverSelection:
         "-",
         doc="the receiver behind the optics: lm_apd (the linear-mode APD chain, Eqs. 7-28) or "
         "gm_apd (a Geiger-mode single-photon array, the gm.* keys)",
-        choices=receiver_kinds,
+        choices=receivers.kinds,
     )
 
 
@@ -468,7 +394,9 @@ class Quality:
     )
 
 
-SECTIONS = {
+# The shared sections, then each receiver's own (``receivers.sections()``: ``gm`` of the
+# Geiger-mode array), then the imaging-quality metrics'.
+_SHARED_SECTIONS = {
     "laser": Laser,
     "transmit": TransmitOptics,
     "receive": ReceiveOptics,
@@ -482,9 +410,32 @@ SECTIONS = {
     "sun": Sun,
     "orbit": Orbit,
     "background": Background,
-    "gm": GeigerMode,
-    "quality": Quality,
 }
+_LAST_SECTIONS = {"quality": Quality}
+
+
+class Sections(Mapping[str, type]):
+    """Every section of a scene, table name -> the dataclass of its keys, in the order of the
+    key reference and the dumps: the shared ones, the receivers' own (read from the registry at
+    each use, so that a receiver registered later is there), the quality metrics'."""
+
+    def _all(self) -> dict[str, type]:
+        return {**_SHARED_SECTIONS, **receivers.sections(), **_LAST_SECTIONS}
+
+    def __getitem__(self, name: str) -> type:
+        return self._all()[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._all())
+
+    def __len__(self) -> int:
+        return len(self._all())
+
+
+SECTIONS = Sections()
+# the sections a receiver declares (the SceneKeys hold them apart from the shared ones)
+RECEIVER_SECTIONS = receivers.sections
+
 
 # The quick parameters shared by the CLI --set, the app state and the Python keyword API.
 QUICK = {

@@ -1,12 +1,14 @@
 """The scene's checks: every key against its declared range, and the rules between keys (the
-time step, the Geiger-mode histogram's size, the orbit epoch, the TLEs and the Sun's band); a
-SceneError names the key to change. Run by ``Scene`` on construction."""
+time step, the orbit epoch, the TLEs and the Sun's band, and those the selected receiver
+declares: the Geiger-mode histogram's size); a SceneError names the key to change. Run by
+``Scene`` on construction."""
 
 from __future__ import annotations
 
 import datetime
 import math
 
+from .. import receivers
 from ..errors import SceneError
 from ..orbit.epoch import EPHEMERIS_FIRST_UTC, EPHEMERIS_LAST_UTC, parse_utc
 from ..orbit.tle import check_tle
@@ -51,62 +53,6 @@ def _check_time_step(scene: SceneKeys) -> None:
         )
 
 
-# Geiger-mode histogram sizes (simcore/receivers/gm_apd.py): bins are int32 in the event records;
-# each detected pixel's centroid reads a dense analysis window of
-# (s + 4 jitter) + (12 s + 4 jitter) bins (s = tau / 2.446, the pulse's Gamma(2) scale), in
-# blocks of GM_WINDOW_BLOCK_VALUES values (32 MB of float64); over the whole array at most
-# GM_MAX_WINDOW_VALUES values (about 2 GB of float64 passes, seconds on two cores).
-GM_MAX_GATE_BINS = 2**31 - 1
-GM_WINDOW_BLOCK_VALUES = 1 << 22
-GM_MAX_WINDOW_VALUES = 1 << 28
-GM_PULSE_SCALE_OVER_TAU = 1.0 / 2.446386  # s / tau for Eq. 1 with tau the FWHM (the larger s)
-
-
-def gm_analysis_window_bins(scene: SceneKeys) -> float:
-    """Bins of one Geiger-mode pixel's dense analysis window: one pulse scale s and four
-    jitter sigmas before the peak window, twelve s and four sigmas after it (an upper bound of
-    ``gm_apd.detect``'s, clipped to the gate)."""
-    g = scene.gm
-    s = scene.laser.pulse_width_s * GM_PULSE_SCALE_OVER_TAU
-    reach = 4.0 * g.jitter_s
-    window = (s + reach) / g.bin_s + (12.0 * s + reach) / g.bin_s + 3.0  # the ceils
-    return min(window, gm_gate_bins(scene))
-
-
-def gm_gate_bins(scene: SceneKeys) -> float:
-    """TDC bins of the Geiger-mode range gate (a float: it may exceed any integer type)."""
-    lo = max(0.0, scene.gate_center_m - scene.timing.range_gate_m / 2.0)
-    hi = scene.gate_center_m + scene.timing.range_gate_m / 2.0
-    bins = 2.0 * (hi - lo) / SPEED_OF_LIGHT_M_S / scene.gm.bin_s
-    return float(math.ceil(bins)) if math.isfinite(bins) else math.inf
-
-
-def _check_gm_bins(scene: SceneKeys) -> None:
-    """The Geiger-mode gate fits int32 bins and the analysis windows stay within
-    GM_WINDOW_BLOCK_VALUES per pixel and GM_MAX_WINDOW_VALUES over the array: refused before
-    any ray is cast, naming the keys to change."""
-    g = scene.gm
-    n_bins = gm_gate_bins(scene)
-    if n_bins > GM_MAX_GATE_BINS:
-        raise SceneError(
-            f"gm.bin_s = {g.bin_s:g} s splits the gate (timing.range_gate_m = "
-            f"{scene.timing.range_gate_m:g} m) into {n_bins:.3g} bins (at most "
-            f"{GM_MAX_GATE_BINS:,}): give a coarser gm.bin_s or a shorter timing.range_gate_m"
-        )
-    window = gm_analysis_window_bins(scene)
-    total = window * scene.detector.pixels**2
-    if window > GM_WINDOW_BLOCK_VALUES or total > GM_MAX_WINDOW_VALUES:
-        floor_s = g.bin_s * max(window / GM_WINDOW_BLOCK_VALUES, total / GM_MAX_WINDOW_VALUES)
-        raise SceneError(
-            f"gm.bin_s = {g.bin_s:g} s is too fine for gm.jitter_s = {g.jitter_s:g} s and "
-            f"laser.pulse_width_s = {scene.laser.pulse_width_s:g} s: each pixel's analysis "
-            f"window is {window:.3g} bins, {total:.3g} over the {scene.detector.pixels}^2 "
-            f"pixels (at most {GM_WINDOW_BLOCK_VALUES:,} and {GM_MAX_WINDOW_VALUES:,}): give "
-            f"gm.bin_s of at least {floor_s:.2g} s, a smaller gm.jitter_s or fewer "
-            "detector.pixels"
-        )
-
-
 SOLAR_TABLE_M = (900e-9, 1700e-9)
 
 
@@ -148,6 +94,9 @@ def validate(scene: SceneKeys) -> None:
     check_fields(scene, "", names=("preset", "seed", "conventions", "paper_forms"))
     for section in SECTIONS:
         check_fields(getattr(scene, section), f"{section}.")
+    for name, _ in scene.receiver_sections:
+        if name not in SECTIONS:
+            raise SceneError(f"[{name}] is no receiver's section")
     d = scene.detector
     if d.gain_from == "bias" and d.bias_voltage_v >= d.breakdown_voltage_v:
         raise SceneError(
@@ -181,8 +130,9 @@ def validate(scene: SceneKeys) -> None:
             f"amplifiers.power_gains has {len(a.power_gains)}: give one of each per stage"
         )
     _check_sun(scene)
-    if scene.receiver.kind == "gm_apd":
-        _check_gm_bins(scene)
+    check = receivers.get(scene.receiver.kind).check_scene  # the receiver's own rules
+    if check is not None:
+        receivers.resolve(check)(scene)
     q = scene.pose.quaternion_wxyz
     if q and (len(q) != 4 or not all(math.isfinite(x) for x in q) or math.hypot(*q) < 1e-9):
         raise SceneError(

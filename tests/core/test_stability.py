@@ -15,10 +15,10 @@ from simcore.receivers.gm_apd import events as gm_events
 from simcore.receivers.gm_apd import frame as gm_frame
 from simcore.receivers.gm_apd import limits as gm_limits
 from simcore.receivers.gm_apd import windows as gm_windows
+from simcore.receivers.gm_apd.section import gm_analysis_window_bins
 from simcore.scene import (
     Scene,
     SceneError,
-    gm_analysis_window_bins,
     key_reference,
     with_overrides,
 )

@@ -10,7 +10,148 @@
 - :mod:`.figures`: the predicted and measured ``gm.*`` figures;
 - :mod:`.pileup` (with :mod:`.expected`, :mod:`.coates`, :mod:`.first_photon`): the range the
   histogram gives at any flux, and the first-photon correction;
-- :mod:`.receiver`: the receiver itself, its two steps registered as ``gm_apd``.
+- :mod:`.section`: its scene section ``[gm]`` and the rules between its keys.
+
+Here: its declaration, ``RECEIVER`` (:mod:`simcore.receivers.declaration`), which the registry
+loads by name; declaring it loads none of the physics above (the steps are named, imported on
+first use).
 
 The model: docs/physics.md#geiger-mode, docs/physics.md#gm-pileup.
 """
+
+from __future__ import annotations
+
+from ..declaration import (
+    Attribute,
+    Control,
+    Figure,
+    Receiver,
+    Section,
+    Series,
+    StatsRow,
+)
+from .section import GeigerMode, check_scene
+
+_HERE = __name__
+
+RECEIVER = Receiver(
+    kind="gm_apd",
+    doc="Geiger-mode single-photon APD array: photon-counting histograms of gm.pulses pulses",
+    section=Section(name="gm", keys=GeigerMode, doc="the Geiger-mode array's parameters"),
+    check_scene=check_scene,
+    response_reads=f"{_HERE}.response:_response_reads",
+    respond=f"{_HERE}.response:respond",
+    detection_reads=f"{_HERE}.detection:_detection_reads",
+    detect=f"{_HERE}.detection:_detect_with_warnings",
+    summary_figures=(
+        Figure(
+            name="n_false_points_expected",
+            unit="1",
+            doc="false points expected in the cloud per frame (the scan statistic)",
+        ),
+        Figure(name="gm.range_bias_m", unit="m", doc="predicted range bias of the estimator"),
+        Figure(name="gm.range_sigma_m", unit="m", doc="predicted range scatter of the cloud"),
+        Figure(
+            name="gm.saturated_pixel_fraction",
+            unit="1",
+            doc="share of lit pixels with over one photoelectron per pulse (piled up)",
+        ),
+        Figure(name="gm.signal_pe_median", unit="1", doc="median echo photoelectrons per pulse"),
+        Figure(name="gm.frame_pulse_energy_j", unit="J", doc="the frame's attenuated pulse energy"),
+        Figure(name="gm.range_error_median_m", unit="m", doc="measured median range error"),
+        Figure(name="gm.range_error_sd_m", unit="m", doc="measured range error sd"),
+    ),
+    point_attributes=(
+        Attribute(name="counts", unit="1", doc="counts in the pixel's peak window"),
+        Attribute(name="signal_pe", unit="1", doc="mean echo photoelectrons per pulse"),
+    ),
+    label="Geiger mode",
+    short="gm",
+    description="Geiger-mode array, {scene[gm][pulses]} pulses",
+    hint="Each pixel counts single photons over the pulses (dead time re-armed at each gate); "
+    "click a pixel to see its histogram against the counts expected without dead time. "
+    "TNR sets the count threshold's false-alarm rate. The transmit attenuation keeps the "
+    "pixels photon-starved (under one photoelectron a pulse): brighter echoes pile up "
+    "and range early.",
+    controls=(
+        Control(
+            name="gm_pde",
+            key="gm.pde",
+            label="Photon detection efficiency",
+            unit="",
+            lo=0.01,
+            hi=1.0,
+            step=0.01,
+            terms=("PDE",),
+        ),
+        Control(
+            name="gm_dark_count_rate_hz",
+            key="gm.dark_count_rate_hz",
+            label="Dark count rate",
+            unit="Hz",
+            lo=1.0,
+            hi=1e8,
+            step=1.0,
+            log_slider=True,
+            terms=("Dark count",),
+        ),
+        Control(
+            name="gm_dead_time_ns",
+            key="gm.dead_time_s",
+            label="Dead time",
+            unit="ns",
+            lo=1.0,
+            hi=1e5,
+            step=1.0,
+            scale=1e-9,
+            log_slider=True,
+            terms=("Dead time", "Pile-up"),
+        ),
+        Control(
+            name="gm_pulses",
+            key="gm.pulses",
+            label="Pulses per frame",
+            unit="",
+            lo=1,
+            hi=1000,
+            step=1,
+            integer=True,
+            terms=("Pulses per frame",),
+        ),
+        Control(
+            name="gm_attenuation_db",
+            key="gm.attenuation_db",
+            label="Transmit attenuation",
+            unit="dB",
+            lo=0.0,
+            hi=100.0,
+            step=1.0,
+            terms=("Transmit attenuation", "Pile-up"),
+        ),
+    ),
+    stats_rows=(
+        StatsRow(label="Echo photoelectrons / pulse", text="{noise[signal_pe_median]:.3g}"),
+        StatsRow(label="Avalanches in the frame", text="{noise[events]:,.0f}"),
+    ),
+    snr_name="count SNR S/√(S+B)",
+    snr_stats_label="Median count SNR S/√(S+B) (frame)",
+    threshold_on_snr_axis=False,
+    chart="counts",
+    chart_title="Photon counts of the selected pixels",
+    chart_series=(
+        Series(style="bars", doc="avalanches counted per time bin over the frame's pulses"),
+        Series(
+            style="solid step",
+            doc="the counts expected from the same pulses (dead time and jitter included)",
+        ),
+        Series(
+            style="dotted",
+            doc="the photons arriving without dead time (right axis when larger): where they "
+            "part, pile-up",
+        ),
+        Series(style="top axis", doc="the range c t / 2"),
+    ),
+    snr_caption="Count SNR S / √(S + B) of the pixels with an echo (the frame's expected "
+    "counts in the peak window)",
+    frame_load=f"{_HERE}.frame:frame_budget",
+)

@@ -23,7 +23,7 @@ from scipy import special
 from ...constants import C
 from ...echo import EchoStage
 from ...scene import Scene
-from ..lm_apd.detection import Outliers
+from ..records import Outliers
 from . import first_photon as fp
 from . import histogram as gh
 from .false_points import expected_false_points

@@ -12,6 +12,7 @@ import numpy as np
 from ...constants import C, H
 from ...echo import EchoStage
 from ...scene import Scene, SceneError
+from ..declaration import FrameLoad
 from . import events as ev
 from .limits import BYTES_PER_EVENT, MAX_EVENTS
 
@@ -157,3 +158,19 @@ def _check_load(scene: Scene, signal_pe, rate_hz, lit_pixel) -> None:
             "fewer pulses, a longer gm.dead_time_s, fewer pixels or a shorter "
             "timing.range_gate_m"
         )
+
+
+def frame_budget(scene: Scene, echo: EchoStage, background=None) -> FrameLoad:
+    """What the frame will record before any avalanche is drawn (the app's budget check): the
+    avalanches :func:`frame_avalanches` expects, the memory of each, and whether the core's own
+    bounds (:func:`frame_load`) hold."""
+    total = frame_avalanches(scene, echo, background)
+    worst, bound = frame_load(scene, echo, background)
+    return FrameLoad(
+        count=total,
+        units="avalanches",
+        bytes_each=BYTES_PER_EVENT,
+        within_core_limits=worst <= MAX_EVENTS_PER_PULSE and bound <= MAX_EVENTS,
+        advice="lower the Pulses per frame, the Dark count rate or the Pixels, or raise the "
+        "Transmit attenuation or the Dead time",
+    )

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import Detection, Response
+from ..records import Detection, Response
 from . import events as ev
 from . import histogram as gh
 

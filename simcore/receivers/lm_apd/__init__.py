@@ -5,5 +5,50 @@
   (Eqs. 19, 24-26, 31);
 - :mod:`.detection`: detection probability and false alarms (Eqs. 27-28), drawn for one flash;
 - :mod:`.montecarlo`: the waveform Monte Carlo model (noisy currents through the discriminator);
-- :mod:`.receiver`: the receiver itself, its two steps registered as ``lm_apd``.
+- :mod:`.receiver`: the receiver's two steps (respond, detect) and the scene values they read.
+
+Here: its declaration, ``RECEIVER`` (:mod:`simcore.receivers.declaration`), which the registry
+loads by name. Its keys are the shared sections ``detector``, ``amplifiers`` and ``timing`` (the
+paper's instrument), so it declares no section of its own.
 """
+
+from __future__ import annotations
+
+from ..declaration import Figure, Receiver, Series
+
+_STEPS = f"{__name__}.receiver"
+
+RECEIVER = Receiver(
+    kind="lm_apd",
+    doc="linear-mode APD and amplifier chain (Eqs. 7-28)",
+    response_reads=f"{_STEPS}:_response_reads",
+    respond=f"{_STEPS}:respond",
+    detection_reads=f"{_STEPS}:_detection_reads",
+    detect=f"{_STEPS}:detect",
+    summary_figures=(
+        Figure(
+            name="n_false_points_expected",
+            unit="1",
+            doc="false points expected in the cloud per frame (after the stops' limit)",
+        ),
+    ),
+    label="Linear mode",
+    short="lm",
+    description="linear-mode APD array",
+    chart="waveform",
+    chart_title="Echo waveforms of the selected pixels",
+    chart_series=(
+        Series(style="solid", doc="received (band-limited)"),
+        Series(style="dotted", doc="unfiltered"),
+        Series(style="dashed", doc="emitted pulse delayed by 2R/c"),
+        Series(style="◆ half-maximum time"),
+        Series(style="vertical line", doc="detected range"),
+        Series(style="dash-dot", doc="threshold (TNR × σn)"),
+        Series(
+            style="by day, orange",
+            doc="the background and the noise band (on a right-hand axis when too small to "
+            "see beside the echo)",
+        ),
+    ),
+    snr_caption="SNR of the pixels with an echo (one flash; the red line: TNR)",
+)

@@ -5,12 +5,11 @@ The model: docs/physics.md#eq-27, docs/physics.md#eq-28, docs/physics.md#statist
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 from scipy import special
 
 from ...constants import C
+from ..records import Outliers
 
 
 def detection_probability(i_pk_a, threshold_a: float | np.ndarray, sigma_pk_a):
@@ -47,14 +46,6 @@ def false_alarms_per_pixel_paper(
 ) -> np.ndarray:
     """Eq. 28 as printed: 2.2 (2 R_gate / c) df 0.5 erfc(TNR / sqrt 2)."""
     return 2.2 * (2.0 * gate_m / C) * df_hz * 0.5 * special.erfc(tnr / np.sqrt(2.0))
-
-
-@dataclass(frozen=True, kw_only=True)
-class Outliers:
-    """False-alarm points: pixel (flat index) and range of each [m]."""
-
-    pixel: np.ndarray  # (n_out,) int64
-    range_m: np.ndarray  # (n_out,) float64
 
 
 def draw_outliers(

@@ -24,7 +24,7 @@ from ...background import Background
 from ...echo import EchoStage
 from ...pulse import A_FWHM
 from ...scene import Scene, SceneError
-from .. import Detection, Receiver, Response, register
+from ..records import Detection, Response
 from . import apd, detection, timing
 
 MAX_OUTLIERS = (
@@ -405,15 +405,3 @@ def _detection_reads(s: Scene) -> tuple:
         s.detector.linear_max_a,
         tuple(s.uses(f) for f in ("eq25_risetime", "eq25_equal_noise", "eq27_paper", "eq28_paper")),
     )
-
-
-RECEIVER = register(
-    Receiver(
-        kind="lm_apd",
-        doc="linear-mode APD and amplifier chain (Eqs. 7-28)",
-        response_reads=_response_reads,
-        respond=respond,
-        detection_reads=_detection_reads,
-        detect=detect,
-    )
-)

@@ -1,11 +1,12 @@
-"""Statistical model (Eqs. 24-28, ours) against the waveform Monte Carlo
+"""Statistical model (Eqs. 24-27, ours) against the waveform Monte Carlo
 (docs/physics.md#monte-carlo).
 
-Writes docs/img/mc_agreement.png with three panels -- P_d vs TNR for several SNR (Eq. 27 curves,
-MC points with binomial error bars), false alarms per pixel per 1 km gate vs TNR (Rice, the
-paper's form, MC points with Poisson error bars) and range sigma vs SNR (Eq. 24 with Eq. 25 per
-sample, the default: each CFD sample's own shot noise, and with the paper's equal-noise form; MC
-points) -- and prints the agreement figures.
+Writes docs/img/mc_agreement.png with two panels -- P_d vs TNR for several SNR (Eq. 27 curves,
+MC points with binomial error bars) and range sigma vs SNR (Eq. 24 with Eq. 25 per sample, the
+default: each CFD sample's own shot noise, and with the paper's equal-noise form; MC points) --
+and prints the agreement figures. False alarms against TNR (Rice, the paper's forms, MC points)
+are drawn in one place, the reproduction's Figure 9 (``lmapd reproduce``:
+fig09_detection.png, with the Monte Carlo / Rice ratios in its report.json).
 
     .venv/bin/python scripts/plot_mc_agreement.py [--out docs/img/mc_agreement.png] [--quick]
 """
@@ -13,7 +14,6 @@ points) -- and prints the agreement figures.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import time
 from pathlib import Path
@@ -25,14 +25,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 from scipy import constants as sc
-from support.mc_scene import DT, K_ATT, RX, RX_THERMAL, SCENE, SHAPE, T_D, T_T, B, E
+from support.mc_scene import DT, K_ATT, RX, RX_THERMAL, SCENE, SHAPE, T_D, T_T, E
 
 from simcore import echo
 from simcore.receivers.lm_apd import detection, montecarlo, timing
 
 C = sc.c
-
-GATE_M = 1000.0
 
 
 def i_pk_for_snr(snr, rx):
@@ -86,48 +84,6 @@ def pd_panel(ax, quick):
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="lower left")
     return worst
-
-
-def false_alarm_panel(ax, quick):
-    tnrs = np.arange(2.0, 5.01, 0.5)
-    target = 150 if quick else 600
-    rng = np.random.default_rng(2025)
-    measured = []
-    for tnr in tnrs:
-        per_pixel = detection.false_alarms_per_pixel(tnr, GATE_M, B)
-        n_px = int(min(16384 if not quick else 4096, math.ceil(target / per_pixel)))
-        empty = np.zeros((0, 1))
-        res = gate(rng, empty, empty, RX, tnr, GATE_M, n_total=n_px)
-        measured.append((res.n_false_alarms, n_px))
-    counts = np.array([m[0] for m in measured], dtype=float)
-    n_px = np.array([m[1] for m in measured], dtype=float)
-    tnr_fine = np.linspace(1.5, 8.0, 300)
-    rice = detection.false_alarms_per_pixel(tnr_fine, GATE_M, B)
-    paper_b = detection.false_alarms_per_pixel_paper(tnr_fine, GATE_M, B)
-    paper_12 = detection.false_alarms_per_pixel_paper(tnr_fine, GATE_M, 12e6)
-    ax.semilogy(tnr_fine, rice, lw=1.8, label="Eq. 28 ours (Rice)")
-    ax.semilogy(tnr_fine, paper_b, "--", lw=1.5, label="Eq. 28 paper, df = B = 120 MHz")
-    ax.semilogy(tnr_fine, paper_12, ":", lw=1.5, label="Eq. 28 paper, df = 12 MHz (Fig. 9)")
-    ax.errorbar(
-        tnrs,
-        counts / n_px,
-        yerr=2 * np.sqrt(np.maximum(counts, 1.0)) / n_px,
-        fmt="o",
-        ms=5,
-        color="k",
-        capsize=2,
-        label="MC, multi-stop (2 Poisson sigma)",
-    )
-    ax.set_xlabel("TNR = V_T / sigma_n  [1]")
-    ax.set_ylabel("false alarms per pixel per 1 km gate  [1]")
-    ax.set_title("False alarms: noise-only pixels, 1 km gate")
-    ax.set_ylim(1e-7, 300)
-    ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8, loc="upper right")
-    rice_pts = detection.false_alarms_per_pixel(tnrs, GATE_M, B)
-    paper_pts = detection.false_alarms_per_pixel_paper(tnrs, GATE_M, B)
-    paper12_pts = detection.false_alarms_per_pixel_paper(tnrs, GATE_M, 12e6)
-    return tnrs, counts, n_px * rice_pts, n_px * paper_pts, n_px * paper12_pts
 
 
 def robust_sigma(x):
@@ -223,10 +179,9 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="fewer trials (a draft)")
     args = parser.parse_args()
     t0 = time.perf_counter()
-    fig, axes = plt.subplots(1, 3, figsize=(18, 5.6))
+    fig, axes = plt.subplots(1, 2, figsize=(12.5, 5.6))
     worst = pd_panel(axes[0], args.quick)
-    tnrs, counts, rice, paper, paper12 = false_alarm_panel(axes[1], args.quick)
-    snrs, ratios = sigma_panel(axes[2], args.quick)
+    snrs, ratios = sigma_panel(axes[1], args.quick)
     fig.suptitle(
         "Statistical model (lines) vs waveform Monte Carlo (points): 5 ns pulse, B = 120 MHz, "
         "dt = 0.42 ns, CFD k = 0.5, t_d = 2.24 ns, T_t = 100 ps",
@@ -242,12 +197,6 @@ def main() -> None:
         f"P_d: max |MC - Eq. 27| = {worst[0]:.3f} at SNR {snr:g}, TNR {tnr:g} "
         f"(MC {p_mc:.3f}, Eq. 27 {p_27:.3f})"
     )
-    print("false alarms per gate, TNR: MC count, MC/Rice, MC/paper(df=B), MC/paper(df=12 MHz)")
-    for u, n, r, p, p12 in zip(tnrs, counts, rice, paper, paper12, strict=True):
-        print(
-            f"  {u:4.1f}: {int(n):6d}  {n / r:5.3f} +- {np.sqrt(n) / r:5.3f}  "
-            f"{n / p:5.2f}  {n / p12:6.1f}"
-        )
     print("range sigma, SNR: MC/Eq.24 (default), MC/shot-aware (default), MC/Eq.24 (thermal)")
     for k, s in enumerate(snrs):
         print(

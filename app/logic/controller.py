@@ -168,6 +168,10 @@ class AppLogic:
                 "scene_camera": None,
                 "frustum": None,
                 "footprint_text": "",
+                "sun_arrow": None,  # the Sun and the Earth seen from the target (scene3d)
+                "earth_arrow": None,
+                "sun_text": "",
+                "earth_text": "",
                 "cloud_points": None,
                 "cloud_outliers": None,
                 "cloud_colorbar": None,
@@ -528,6 +532,7 @@ class AppLogic:
                 {"views (app)": frame.views_s, "request to page": total_s},
             ),
             "footprint_text": scene3d.footprint_text(frame.result.scene),
+            **scene3d.sun_and_earth(frame.result.scene, self.engine.model, self.engine.frame),
             "error_message": "",
             "frame_key": key,
             "frame_generation": outcome.generation,

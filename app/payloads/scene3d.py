@@ -17,6 +17,7 @@ import simcore
 from app.payloads import encode
 from app.payloads.style import HIDDEN_COLOR, MATERIAL_COLORS, OTHER_MATERIAL_COLOR
 from simcore.geometry import front_view_rotation
+from simcore.orbit.elements import R_EARTH_M
 
 # Flip of the sensor axes (x right, y down, z boresight) to the display's (x right, y up, -z view).
 FLIP = np.diag([1.0, -1.0, -1.0])
@@ -213,3 +214,79 @@ def frustum_mesh(result: simcore.Result, frame: DisplayFrame) -> dict:
             "lines": encode.typed_array(encode.polyline_cells(segments)),
         }
     }
+
+
+# ----------------------------------------------------------------------------------------------
+# the Sun and the Earth seen from the target
+# ----------------------------------------------------------------------------------------------
+SUN_COLOR = "#ffca28"  # the Sun's arrow and legend swatch
+EARTH_COLOR = "#42a5f5"  # the Earth's
+ARROW_FROM, ARROW_TO = 1.15, 2.0  # an arrow's ends [target bounding radii from its centre]
+
+
+def arrow_lines(
+    center: np.ndarray, direction: np.ndarray, radius_m: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """An arrow outside the target pointing along ``direction`` (3,), from ``ARROW_FROM`` to
+    ``ARROW_TO`` bounding radii ``radius_m`` away from ``center`` (3,) [m]: its points (6, 3) [m]
+    and segments (5, 2) int (the shaft, then a head of four barbs)."""
+    d = np.asarray(direction, dtype=np.float64)
+    d = d / np.linalg.norm(d)
+    # two axes across the arrow: from the display axis least aligned with it
+    across = np.cross(d, np.eye(3)[int(np.argmin(np.abs(d)))])
+    across /= np.linalg.norm(across)
+    other = np.cross(d, across)
+    tail, tip = center + ARROW_FROM * radius_m * d, center + ARROW_TO * radius_m * d
+    head = 0.18 * radius_m
+    barbs = [tip - head * d + 0.45 * head * s * a for a in (across, other) for s in (1.0, -1.0)]
+    points = np.vstack([tail, tip, *barbs])
+    segments = np.array([[0, 1], [1, 2], [1, 3], [1, 4], [1, 5]])
+    return points, segments
+
+
+def azimuth_elevation_deg(direction_body: np.ndarray) -> tuple[float, float]:
+    """A body-frame direction as the Sun control's angles: azimuth from +x towards +y, elevation
+    above the x-y plane towards -z (the zenith; simcore.sun.direction_from_angles inverted)."""
+    x, y, z = (float(c) for c in direction_body / np.linalg.norm(direction_body))
+    return math.degrees(math.atan2(y, x)), math.degrees(math.asin(max(-1.0, min(1.0, -z))))
+
+
+def sun_and_earth(scene: simcore.Scene, model: simcore.TargetModel, frame: DisplayFrame) -> dict:
+    """The state of the scene view's Sun and Earth: an arrow towards each (vtk.js mesh states in
+    the display frame, around the target's centre), and the legend's words with their angles in
+    the target's frame (as the Sun control gives them). No arrows and empty words for
+    ``sun.mode = none`` (the paper's dark sky)."""
+    none = {"sun_arrow": None, "earth_arrow": None, "sun_text": "", "earth_text": ""}
+    if scene.sun.mode == "none":
+        return none
+    from simcore import sun  # noqa: PLC0415  (the ephemeris and the orbits: only with a Sun)
+
+    geo = sun.sun_geometry(scene)
+    if geo is None:
+        return none
+    center = frame.from_target(model.mesh.bounds.mean(axis=0)[None, :])[0]
+    update: dict = {}
+    to_earth = np.asarray(geo.earth_center_body_m, dtype=np.float64)
+    for name, body in (("sun", geo.direction_body), ("earth", to_earth)):
+        mesh_dir = model.body_from_mesh.T @ np.asarray(body, dtype=np.float64)  # the mesh frame
+        points, segments = arrow_lines(
+            center, frame.from_target(mesh_dir[None, :])[0], model.radius_m
+        )
+        update[f"{name}_arrow"] = {
+            "mesh": {
+                "points": encode.typed_array(points.astype(np.float32)),
+                "lines": encode.typed_array(encode.polyline_cells(segments)),
+            }
+        }
+    az, el = azimuth_elevation_deg(geo.direction_body)
+    shade = ", the target in the Earth's shadow" if geo.eclipsed else ""
+    update["sun_text"] = f"Sun: azimuth {az:.0f}°, elevation {el:.0f}° (target frame){shade}"
+    az, el = azimuth_elevation_deg(to_earth)
+    altitude_km = (float(np.linalg.norm(to_earth)) - R_EARTH_M) / 1e3
+    where = (
+        "below (the target's nadir, +z)"
+        if el < -89.5
+        else f"azimuth {az:.0f}°, elevation {el:.0f}°"
+    )
+    update["earth_text"] = f"Earth: {altitude_km:,.0f} km {where}"
+    return update

@@ -1,6 +1,7 @@
-"""The two 3D views, rendered client-side by vtk.js (no server-side OpenGL): the scene (target
-mesh coloured by material where seen, grey where hidden, the field-of-view frustum, a legend)
-and the point cloud (coloured by range, SNR or outlier flag; outliers always red and larger).
+"""The two 3D views, rendered client-side by vtk.js (no server-side OpenGL): the scene (target mesh
+coloured by material where seen, grey where hidden, the field-of-view frustum, arrows towards the
+Sun and the Earth when there is a Sun, a legend) and the point cloud (coloured by range, SNR or
+outlier flag; outliers always red and larger).
 
 Data arrive as binary typed arrays in the trame state (``app/static/binary.js`` makes vtk.js's typed
 arrays of them: ``trame.utils.lmapdBin``). The whole mesh is sent once and drawn grey; the facets
@@ -16,11 +17,15 @@ from trame.widgets import vtk as vtkw
 from trame.widgets import vuetify3 as v3
 
 from app.payloads import encode
+from app.payloads.scene3d import EARTH_COLOR, SUN_COLOR
 from app.payloads.style import HIDDEN_COLOR
 
 BACKGROUND = "[0.102, 0.110, 0.137]"  # #1a1c23
 BACKGROUND_RGB = (26, 28, 35)
 HIDDEN_RGB = [round(c / 255, 3) for c in encode.rgb_of(HIDDEN_COLOR)]
+SUN_RGB, EARTH_RGB = (
+    [round(c / 255, 3) for c in encode.rgb_of(x)] for x in (SUN_COLOR, EARTH_COLOR)
+)
 
 
 def _bin(key: str) -> str:
@@ -91,6 +96,13 @@ def scene_card() -> None:
                     actor=("{ visibility: !!frustum }",),  # no input before the first frame
                 ):
                     vtkw.VtkMesh("frustum", state=(_bin("frustum"),))
+                for name, rgb in (("sun", SUN_RGB), ("earth", EARTH_RGB)):  # seen from the target
+                    with vtkw.VtkGeometryRepresentation(
+                        id=f"{name}_arrow",
+                        property=(f"{{ color: {rgb}, lineWidth: 3, lighting: false }}",),
+                        actor=(f"{{ visibility: !!{name}_arrow }}",),
+                    ):
+                        vtkw.VtkMesh(f"{name}_arrow", state=(_bin(f"{name}_arrow"),))
             _material_legend()
             html.Div("{{ credit }}", classes="credit-overlay")
 
@@ -112,6 +124,10 @@ def _material_legend() -> None:
         with html.Div(classes="legend-row"):
             html.Span(classes="swatch swatch-line")
             html.Span("field of view: {{ footprint_text }}", classes="legend-label")
+        for name, color in (("sun", SUN_COLOR), ("earth", EARTH_COLOR)):
+            with html.Div(v_if=f"{name}_text", classes=f"legend-row {name}-row"):
+                html.Span(classes="swatch swatch-line", style=f"background: {color}")
+                html.Span(f"{{{{ {name}_text }}}}", classes="legend-label")
 
 
 def cloud_card() -> None:

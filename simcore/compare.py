@@ -1,5 +1,6 @@
-"""The same scene with both receivers (``lmapd compare``): the LM-APD's single flash against the
-Geiger-mode array's frame over distance and pulse energy (docs/physics.md#geiger-mode).
+"""The same scene with every receiver (``lmapd compare``): the LM-APD's single flash against the
+Geiger-mode array's frame (and any other registered receiver) over distance and pulse energy
+(docs/physics.md#geiger-mode).
 
 Per (receiver, distance, pulse energy): target points, the range error of the detected pixels
 (measured less the noise-free range: its rms, its median, the bias, and its sd about the mean,
@@ -20,12 +21,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import receivers
 from .pipeline import Pipeline
 from .scene import Scene, with_overrides
 
 DISTANCES_M = (100.0, 300.0, 1000.0, 3000.0, 10000.0)
 ENERGIES_J = (5e-5, 5e-3)
-RECEIVERS = ("lm_apd", "gm_apd")
 MAX_PULSES = 10_000  # the search for the pulses needed stops here (reported as inf)
 
 
@@ -49,25 +50,20 @@ class Row:
 
 def pulses_needed(scene: Scene, result, p_target: float) -> float:
     """Pulses for P_d >= p_target in the median lit pixel (module docstring); inf if more than
-    MAX_PULSES."""
+    MAX_PULSES. A receiver that sums pulses into a frame says how (its declaration's
+    ``pulses_needed``); otherwise independent flashes, from the per-flash P_d."""
     if len(result.echo.pixel) == 0:
         return math.inf
-    if scene.receiver.kind == "lm_apd":
-        p = float(np.median(result.detection.p_detect))
-        if p >= p_target:
-            return 1.0
-        if p <= 0:
-            return math.inf
-        n = math.ceil(math.log1p(-p_target) / math.log1p(-p))
-        return float(n) if n <= MAX_PULSES else math.inf
-    from .receivers.gm_apd import windows as gm_windows  # noqa: PLC0415
-
-    for n in np.unique(np.geomspace(1, MAX_PULSES, 60).astype(int)):
-        s = with_overrides(scene, {"gm.pulses": int(n)})
-        p_d = gm_windows.frame_detection_probability(s, result.echo, result.receiver)
-        if float(np.median(p_d)) >= p_target:
-            return float(n)
-    return math.inf
+    own = receivers.get(scene.receiver.kind).pulses_needed
+    if own is not None:
+        return float(receivers.resolve(own)(scene, result, p_target, MAX_PULSES))
+    p = float(np.median(result.detection.p_detect))
+    if p >= p_target:
+        return 1.0
+    if p <= 0:
+        return math.inf
+    n = math.ceil(math.log1p(-p_target) / math.log1p(-p))
+    return float(n) if n <= MAX_PULSES else math.inf
 
 
 def compare(
@@ -79,7 +75,8 @@ def compare(
 ) -> list[Row]:
     """Every (receiver, distance, energy) of ``base`` (its pixels, target, optics, seed)."""
     rows = []
-    for kind in RECEIVERS:
+    for kind in receivers.kinds():
+        declared = receivers.get(kind)
         pipe = Pipeline()
         for d in distances_m:
             for e in energies_j:
@@ -101,10 +98,10 @@ def compare(
                         range_noise_m=float(np.sqrt(np.mean(err**2))) if len(err) else math.nan,
                         range_bias_m=float(np.median(err)) if len(err) else math.nan,
                         range_sd_m=float(np.std(err)) if len(err) > 1 else math.nan,
-                        predicted_bias_m=_figure(
-                            s, "gm.range_bias_m", 0.0 if kind == "lm_apd" else None
+                        predicted_bias_m=_figure(s, declared.range_bias_figure, 0.0),
+                        predicted_sd_m=_figure(
+                            s, declared.range_sigma_figure, s["range_sigma_m_median"]
                         ),
-                        predicted_sd_m=_figure(s, "gm.range_sigma_m", s["range_sigma_m_median"]),
                         n_outliers=s["n_outliers"],
                         n_false_points_expected=float(s.get("n_false_points_expected", math.nan)),
                         pulses_needed=pulses_needed(scene, res, p_target),
@@ -118,7 +115,8 @@ def compare(
     return rows
 
 
-def _figure(summary: dict, key: str, default) -> float:
-    """A summary figure as a float (NaN where absent or undefined)."""
-    v = summary.get(key, default)
+def _figure(summary: dict, key: str | None, default) -> float:
+    """A summary figure as a float (NaN where undefined; ``default`` where the receiver declares
+    none)."""
+    v = default if key is None else summary.get(key)
     return math.nan if v is None else float(v)

@@ -7,6 +7,7 @@ lmapd compare [SCENE.toml] [--set NAME=VALUE ...] --out DIR [--quick] [--p-detec
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import math
 from pathlib import Path
@@ -92,9 +93,10 @@ def draw(rows, path: Path, p_target: float) -> None:
         ("n_outliers", "false points per frame (dotted: expected)"),
         ("pulses_needed", f"pulses for P_d = {p_target:g}"),
     )
-    styles = {"lm_apd": "-o", "gm_apd": "--s"}
+    kinds = list(dict.fromkeys(r.receiver for r in rows))  # in the order compared
+    styles = dict(zip(kinds, itertools.cycle(("-o", "--s", "-.^", ":d")), strict=False))
     for ax, (field, label) in zip(axes, panels, strict=True):
-        for kind in ("lm_apd", "gm_apd"):
+        for kind in kinds:
             for e in sorted({r.pulse_energy_j for r in rows}):
                 sel = [r for r in rows if r.receiver == kind and r.pulse_energy_j == e]
                 x = [r.distance_m for r in sel]

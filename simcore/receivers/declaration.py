@@ -150,6 +150,13 @@ class Receiver:
         snr_caption: their words
     frame_load : (scene, echo, background) -> :class:`FrameLoad`, what a frame will cost before
         its receiver stage runs (the app refuses frames over its budget), or None (no check)
+    frame_pulses_key : the key of its pulses per frame (a frame sums that many pulses; the
+        design studies' total pulse energy), None: one pulse a frame
+    pulses_needed : (scene, result, p_target, max_pulses) -> the pulses a frame needs for
+        P_d >= p_target in the median lit pixel (``lmapd compare``; inf beyond max_pulses), or
+        None: independent single flashes, from the per-flash P_d
+    range_bias_figure, range_sigma_figure : the summary figures of its predicted range bias
+        (None: unbiased) and range sd (``lmapd compare``)
     """
 
     kind: str
@@ -177,3 +184,7 @@ class Receiver:
     chart_series: tuple[Series, ...] = ()
     snr_caption: str = ""
     frame_load: Step | None = None
+    frame_pulses_key: str | None = None
+    pulses_needed: Step | None = None
+    range_bias_figure: str | None = None
+    range_sigma_figure: str = "range_sigma_m_median"

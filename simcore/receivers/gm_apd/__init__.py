@@ -154,4 +154,8 @@ RECEIVER = Receiver(
     snr_caption="Count SNR S / √(S + B) of the pixels with an echo (the frame's expected "
     "counts in the peak window)",
     frame_load=f"{_HERE}.frame:frame_budget",
+    frame_pulses_key="gm.pulses",
+    pulses_needed=f"{_HERE}.windows:pulses_needed",
+    range_bias_figure="gm.range_bias_m",
+    range_sigma_figure="gm.range_sigma_m",
 )

@@ -8,12 +8,14 @@ The model: docs/physics.md#geiger-mode.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy import special
 
 from ...constants import C
 from ...echo import EchoStage
-from ...scene import Scene
+from ...scene import Scene, with_overrides
 from . import events as ev
 from .frame import ECHO_TAIL_SCALES, JITTER_REACH, _gate_s, photon_energy_j
 from .limits import armed_probability
@@ -169,3 +171,15 @@ def _threshold_power_w(scene, echo, k_t: float, bg_per_bin, width: int) -> float
     signal_pe = -np.log1p(-need) / f
     energy_j = signal_pe * photon_energy_j(scene.laser.wavelength_m) / gm.pde
     return float(energy_j * echo.shape.peak_w_per_j)
+
+
+def pulses_needed(scene: Scene, result, p_target: float, max_pulses: int) -> float:
+    """The least frame length N (``gm.pulses``) whose predicted P_d (counts of N pulses against
+    their threshold, :func:`frame_detection_probability`) reaches ``p_target`` in the median lit
+    pixel, searched over 60 lengths from 1 to ``max_pulses``; inf if none."""
+    for n in np.unique(np.geomspace(1, max_pulses, 60).astype(int)):
+        s = with_overrides(scene, {"gm.pulses": int(n)})
+        p_d = frame_detection_probability(s, result.echo, result.receiver)
+        if float(np.median(p_d)) >= p_target:
+            return float(n)
+    return math.inf

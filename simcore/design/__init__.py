@@ -48,7 +48,8 @@ from .search import (
     search,
     to_confirm,
 )
-from .study import Requirement, Study, StudyError, Variable, load_study, study_from_dict
+from .study import Requirement, Study, StudyError, Variable
+from .study_file import load_study, study_from_dict
 
 __all__ = [
     "DesignResult",

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 import simcore
+from app.payloads.orbits import OrbitMap
 from simcore import orbit
 
 MODES = ("single", "flyaround")
@@ -52,6 +53,7 @@ class FlyaroundPoses:
         imaging: orbit.Elements = orbit.PAPER_IMAGING,
     ):
         self.interval_s = float(interval_s)
+        self.duration_s = float(duration_s)
         self.times_s = orbit.flyaround_times(interval_s, duration_s)
         self._orbits = (target, imaging)
         self._poses: dict[bool, orbit.RelativePose] = {}
@@ -59,6 +61,11 @@ class FlyaroundPoses:
     @property
     def t_max_s(self) -> float:
         return float(self.times_s[-1])
+
+    @property
+    def orbits(self) -> tuple[orbit.Elements, orbit.Elements]:
+        """The target's and the lidar's orbits."""
+        return self._orbits
 
     def pose(self, j2: bool) -> orbit.RelativePose:
         if j2 not in self._poses:
@@ -189,6 +196,7 @@ class FlyaroundLogic:
         self.poses = poses or FlyaroundPoses()
         self.player = player or Player()
         self.controls = FlyaroundControls()
+        self.map = OrbitMap(self.poses.duration_s, *self.poses.orbits)
         self._drawn_key = ""
         self._timer: asyncio.TimerHandle | None = None
         self.state.update(
@@ -200,6 +208,7 @@ class FlyaroundLogic:
                 "fly_t_max_s": self.poses.t_max_s,
                 "fly_interval_s": self.poses.interval_s,
                 "fly_readout": self._readout(),
+                "fly_map": None,  # the orbits' map: drawn in fly-around mode only
             }
         )
         self.state.change(*STATE_KEYS)(self.on_change)
@@ -220,6 +229,13 @@ class FlyaroundLogic:
 
     def _readout(self) -> dict[str, str]:
         return self.poses.readout(self.controls.t_s, self.controls.j2, self.fov_rad)
+
+    def _map(self) -> dict | None:
+        """The orbits' map at the frame's time (None outside fly-around mode: not drawn)."""
+        if not self.active:
+            return None
+        t_s = float(self.poses.times_s[self.poses.index_of(self.controls.t_s)])
+        return self.map.figure(t_s, self.controls.j2)
 
     # -- state handlers --------------------------------------------------------------------------
     def on_change(self, **_: Any) -> None:
@@ -242,6 +258,7 @@ class FlyaroundLogic:
         was_active = self.active
         self.controls = controls
         fixed["fly_readout"] = self._readout()
+        fixed["fly_map"] = self._map()
         if not self.active and self.state.fly_playing:
             self.player.pause()
             fixed["fly_playing"] = False

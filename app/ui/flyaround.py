@@ -1,9 +1,10 @@
 """The drawer's mode switch (single frame / fly-around) and the fly-around panel: time slider,
-play/pause, the J2 switch and a readout of the frame's time, distance and attitude."""
+play/pause, the J2 switch, a readout of the frame's time, distance and attitude, and a map of the
+orbits."""
 
 from __future__ import annotations
 
-from trame.widgets import html
+from trame.widgets import html, plotly
 from trame.widgets import vuetify3 as v3
 
 from app.ui.widgets import a11y_attributes, button_toggle
@@ -87,3 +88,17 @@ def flyaround_panel() -> None:
                         html.Td(label)
                         html.Td(f"{{{{ fly_readout.{key} }}}}", classes="stat-value")
         html.Div(FOV_HINT, classes="text-caption hint fly-hint mt-1")
+        orbit_map()
+
+
+def orbit_map() -> None:
+    """The two orbits around the Earth and the lidar's path around the target (app.payloads.orbits),
+    with where they are at the frame's time."""
+    with html.Div(v_if="fly_map", classes="fly-map"):
+        html.Div(
+            "Top: the Earth and the two orbits (the target's dot: now). Bottom: the lidar's path "
+            "around the target over the orbit, seen from the target (its dot: now).",
+            classes="text-caption hint mt-1",
+        )
+        with html.Div(classes="chart-box fly-map-box"):
+            plotly.Figure(state_variable_name="fly_map", display_mode_bar=False, responsive=True)

@@ -144,7 +144,22 @@ def write_figures(study: Study, records: Sequence[Record], front, winner, out: P
     screened = [r for r in records if r.stage in ("screen", "polish")]
     ok = [r for r in screened if r.feasible]
     bad = [r for r in screened if not r.feasible and all(math.isfinite(x) for x in r.objectives)]
+    figures = {  # drawn, written and closed one at a time
+        "front.png": lambda: _front_figure(plt, study, screened, ok, bad, front, winner),
+        "margins.png": lambda: _margins_figure(plt, study, winner),
+        "effects.png": lambda: _effects_figure(plt, study, ok, bad),
+    }
     paths = []
+    for name, draw in figures.items():
+        fig = draw()
+        paths.append(_save(fig, out / name))
+        plt.close(fig)
+    return paths
+
+
+def _front_figure(plt, study: Study, screened, ok, bad, front, winner):
+    """The costs of every screened design (two costs: against each other, the front joined; one:
+    against the order run, the winner's level marked)."""
     fig, ax = plt.subplots(figsize=(6.4, 4.4))
     if len(study.minimize) >= 2:
         x, y = study.minimize[0], study.minimize[1]
@@ -199,9 +214,11 @@ def write_figures(study: Study, records: Sequence[Record], front, winner, out: P
     ax.set_title(f"{study.name}: {len(screened)} designs screened ({study.preset})")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    paths.append(_save(fig, out / "front.png"))
-    plt.close(fig)
+    return fig
 
+
+def _margins_figure(plt, study: Study, winner):
+    """The winner's margin over each requirement's bound, one bar per envelope point."""
     fig, ax = plt.subplots(figsize=(6.4, 0.6 + 0.5 * max(1, len(study.requirements))))
     if winner is not None and study.requirements:
         n_points = len(study.envelope)
@@ -226,9 +243,11 @@ def write_figures(study: Study, records: Sequence[Record], front, winner, out: P
     else:
         ax.text(0.5, 0.5, "no feasible design", ha="center", va="center")
     fig.tight_layout()
-    paths.append(_save(fig, out / "margins.png"))
-    plt.close(fig)
+    return fig
 
+
+def _effects_figure(plt, study: Study, ok, bad):
+    """Each variable against the first cost, feasible designs in blue."""
     n = len(study.variables)
     fig, axes = plt.subplots(1, n, figsize=(3.2 * n, 3.0), squeeze=False)
     for ax, var in zip(axes[0], study.variables, strict=True):
@@ -244,9 +263,7 @@ def write_figures(study: Study, records: Sequence[Record], front, winner, out: P
         ax.set_ylabel(study.minimize[0], fontsize=8)
     fig.suptitle("Each variable against the first cost (blue: feasible)", fontsize=9)
     fig.tight_layout()
-    paths.append(_save(fig, out / "effects.png"))
-    plt.close(fig)
-    return paths
+    return fig
 
 
 def _save(fig, path: Path) -> Path:

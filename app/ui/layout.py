@@ -131,6 +131,8 @@ def build_layout(server) -> VAppLayout:
     server.state.client_only("glossary_open", "glossary_term")
     server.state.link_copied = ""  # what "Copy link" answered (app.ui.controls.share_panel)
     server.state.client_only("link_copied")
+    server.state.wave_cursor = ""  # the waveform chart's cursor readout (app.ui.panels)
+    server.state.client_only("wave_cursor")
     with VAppLayout(server, full_height=True) as layout:
         client.Script(classroom.KEYBOARD_SCRIPT)
         client.Style(classroom.CURSOR_CSS)

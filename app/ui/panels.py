@@ -219,6 +219,12 @@ def array_card() -> None:
                 html.Span("{{ array_image.colorbar.hi }}")
 
 
+# The waveform chart's measuring cursor (app/static/cursor.js): a click on a trace places cursor A,
+# the next B; the readout (the page's own state, never sent) gives their times, ranges and
+# difference.
+CURSOR_CLICK = "wave_cursor = trame.utils.lmapdCursor.click($event)"
+
+
 def waveform_card() -> None:
     with v3.VCard(classes="view-card waveform-card", elevation=1):
         with v3.VCardTitle(classes="card-title"):
@@ -232,6 +238,22 @@ def waveform_card() -> None:
                 mode_bar_buttons_to_remove=(
                     "['select2d', 'lasso2d', 'autoScale2d', 'toggleSpikelines']",
                 ),
+                click=CURSOR_CLICK,
+                after_plot="trame.utils.lmapdCursor.redraw()",
+            )
+        with html.Div(classes="d-flex align-center px-4 wave-cursor"):
+            html.Span(
+                "{{ wave_cursor || 'Click a trace to place a measuring cursor (A, then B)' }}",
+                classes="text-caption hint wave-cursor-text",
+            )
+            v3.VSpacer()
+            v3.VBtn(
+                "Clear",
+                v_if="wave_cursor",
+                size="x-small",
+                variant="text",
+                click="wave_cursor = trame.utils.lmapdCursor.clear()",
+                classes="wave-cursor-clear",
             )
 
 

@@ -22,6 +22,7 @@ SCRIPTS = (
     "a11y.js",  # accessible names and spoken values of the controls
     "link.js",  # shared links: trame.utils.lmapdLink (app.ui.controls), the address bar
     "view-scroll.js",  # the 3D views leave the page's scroll alone
+    "cursor.js",  # the waveform chart's measuring cursor: trame.utils.lmapdCursor (app.ui.panels)
 )
 STYLES = ("page.css",)
 

@@ -1,10 +1,12 @@
 """The page's own scripts and styles (app/static/, served by app.ui.static): each script parses
 (``node --check``, as ``make lint`` runs it), each style sheet is well formed, every file of the
-folder is one the page loads, and the page's server serves them under a name that changes with
-their contents."""
+folder is one the page loads, the page's server serves them under a name that changes with their
+contents, and the waveform chart's measuring cursor (cursor.js, run in Node.js on a stand-in chart)
+gives its two cursors, their difference and its lines."""
 
 from __future__ import annotations
 
+import json
 import re
 import shutil
 import subprocess
@@ -107,3 +109,58 @@ def test_the_page_loads_its_files_after_the_widget_libraries_styles():
     assert [s for s in scripts if s.startswith(name)] == module["scripts"]
     assert styles[-len(module["styles"]) :] == module["styles"]  # last: these rules win
     assert any("vuetify" in s for s in styles[: -len(module["styles"])])
+
+
+CURSOR_HARNESS = r"""
+const fs = require('fs');
+const vm = require('vm');
+const gd = { layout: { shapes: [{ name: 'threshold' }] } };
+const relayouts = [];
+global.window = { trame: { utils: {} }, Plotly: {
+  relayout: (el, update) => { relayouts.push(update); el.layout = { ...el.layout, ...update }; },
+} };
+global.document = { querySelector: (selector) => (selector.includes('waveform-box') ? gd : null) };
+vm.runInThisContext(fs.readFileSync(process.argv[2], 'utf8'));
+const cursor = window.trame.utils.lmapdCursor;
+const names = () => gd.layout.shapes.map((s) => `${s.name}${s.x0 === undefined ? '' : '@' + s.x0}`);
+const out = {};
+out.a = cursor.click({ points: [{ x: 3335.64 }] });
+out.ab = cursor.click({ points: [{ x: 3344.8125 }] });
+out.nothing = cursor.click({ points: [] });
+out.shapes_ab = names();
+gd.layout = { shapes: [{ name: 'threshold' }] };  // a new plot: the cursors dropped
+const before = relayouts.length;
+cursor.redraw();
+out.redrawn = names();
+cursor.redraw();  // already drawn: no relayout
+out.relayouts_by_redraw = relayouts.length - before;
+out.again = cursor.click({ points: [{ x: 100 }] });
+out.cleared = cursor.clear();
+out.shapes_cleared = names();
+console.log(JSON.stringify(out));
+"""
+
+
+def test_the_measuring_cursor_gives_a_then_b_and_their_difference(tmp_path):
+    assert NODE
+    harness = tmp_path / "harness.js"
+    harness.write_text(CURSOR_HARNESS, encoding="utf-8")
+    done = subprocess.run(
+        [NODE, str(harness), str(static.STATIC_DIR / "cursor.js")], capture_output=True, text=True
+    )
+    assert done.returncode == 0, done.stderr
+    out = json.loads(done.stdout)
+    c = 299792458.0
+
+    def where(t_ns: float) -> str:
+        return f"{t_ns:,.2f} ns ({t_ns * 1e-9 * c / 2:,.3f} m)"
+
+    a, b = 3335.64, 3344.8125
+    assert out["a"] == f"A: {where(a)}"
+    gap = f"{b - a:,.2f} ns, {(b - a) * 1e-9 * c / 2:,.3f} m in range"
+    assert out["ab"] == f"A: {where(a)}, B: {where(b)}; B − A: {gap}"
+    assert out["nothing"] == out["ab"]  # a click beside the traces changes nothing
+    assert out["shapes_ab"] == ["threshold", f"cursor@{a}", f"cursor@{b}"]  # the chart's kept
+    assert out["redrawn"] == out["shapes_ab"] and out["relayouts_by_redraw"] == 1
+    assert out["again"] == f"A: {where(100.0)}"  # a third click starts again with A
+    assert out["cleared"] == "" and out["shapes_cleared"] == ["threshold"]

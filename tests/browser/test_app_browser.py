@@ -146,6 +146,25 @@ def test_the_app_draws_reacts_to_the_distance_slider_and_shows_a_clicked_pixels_
     assert state(page, "selected_pixels") == [[row, col], list(default)]
     page.locator(".waveform-card").screenshot(path=artifacts_dir / "app-waveforms.png")
 
+    # the measuring cursor: plotly's click on the chart (as a click on a trace emits it) places A,
+    # then B; a dashed line each on the chart, their difference in the readout
+    chart = ".waveform-box .js-plotly-plot"
+    for t_ns in (3335.64, 3344.81):
+        page.evaluate(
+            "([sel, x]) => document.querySelector(sel).emit('plotly_click', { points: [{ x }] })",
+            [chart, t_ns],
+        )
+    readout = page.locator(".wave-cursor-text")
+    readout.filter(has_text="B − A: 9.17 ns, 1.375 m in range").wait_for(timeout=10_000)
+    assert readout.inner_text().startswith("A: 3,335.64 ns (500.")
+    cursors = (
+        f"() => document.querySelector('{chart}').layout.shapes.filter(s => s.name === 'cursor')"
+    )
+    page.wait_for_function(f"() => ({cursors})().length === 2", timeout=10_000)
+    assert [s["x0"] for s in page.evaluate(cursors)] == [3335.64, 3344.81]
+    page.locator(".wave-cursor-clear").click()
+    page.wait_for_function(f"() => ({cursors})().length === 0", timeout=10_000)
+
     # a value outside the range is clamped, with a visible message and no stack trace
     set_field(page, "distance_m", 99999)
     message = page.locator(".input-message")

@@ -340,7 +340,7 @@ def convention_row(result: Result) -> dict[str, Any]:
     r = attrs["range_m"][tgt]
     extent = float(np.percentile(r, 99) - np.percentile(r, 1)) if len(r) else None
     row = {k: summary[k] for k in CONVENTION_COLUMNS if k in summary}
-    row["peak_current_median_a"] = finite_median(result.receiver.i_pk_a)  # type: ignore[attr-defined]  # the paper's LM-APD
+    row["peak_current_median_a"] = finite_median(result.receiver.i_pk_a)  # the paper's LM-APD
     d = result.detection
     sigma_t = timing.sigma_quantisation_m(result.scene.timing.resolution_s)
     cfd = np.sqrt(np.maximum(d.range_sigma_m[d.detected] ** 2 - sigma_t**2, 0.0))

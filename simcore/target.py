@@ -31,9 +31,10 @@ from pathlib import Path
 import numpy as np
 
 from . import calibration
+from ._assets import ASSETS_DIR
 from .cache import CACHE_ENV, cache_dir, write_atomically
 from .materials import read_material_map
-from .scene import ASSETS_DIR, MESH_SUFFIXES, Target
+from .scene import MESH_SUFFIXES, Target
 from .target_mesh import (
     LENGTH_UNITS_M,
     MAX_EXTENT_M,

@@ -27,13 +27,32 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import geometry, materials
+from . import geometry, materials, parallel
 from .scene import Scene
 from .stage import Stage, readonly
 from .target import with_materials
 
 SHADOW_OFFSET = 1e-4  # [-] shadow rays start this fraction of the target's radius off the facet
 THIN_FROM = 64  # [-] blocks of this many sub-rays per pixel or more are thinned to a quarter
+CHUNK_PIXELS = 4096  # [-] pixels a thread takes at a time (fixed: results never depend on threads)
+
+
+def _pieces(block: geometry.HitBlock, size: int | None = None) -> list[geometry.HitBlock]:
+    """The block's pixels in pieces of ``size`` (CHUNK_PIXELS) consecutive rows."""
+    size = CHUNK_PIXELS if size is None else size
+    if len(block.pixel) <= size:
+        return [block]
+    return [
+        geometry.HitBlock(
+            pixel=block.pixel[i : i + size],
+            directions=block.directions[i : i + size],
+            range_m=block.range_m[i : i + size],
+            cos_theta=block.cos_theta[i : i + size],
+            face=block.face[i : i + size],
+            depth_m=block.depth_m[i : i + size],
+        )
+        for i in range(0, len(block.pixel), size)
+    ]
 
 
 def thinned(block: geometry.HitBlock) -> geometry.HitBlock:
@@ -205,7 +224,10 @@ def stage_background(scene: Scene, tgt: geometry.TargetStage, hits: geometry.Hit
     earth_w = np.zeros(n * n)
     sunlit = np.zeros(n * n, dtype=bool)
     earth = np.zeros(n * n, dtype=bool)
-    for block in map(thinned, hits.blocks()):
+
+    def light(block: geometry.HitBlock) -> None:
+        """The block's pixels' target and Earth light, into the frame's arrays (each block's
+        pixels its own)."""
         per_ray = etendue / block.subrays  # eta_r A_r Omega_k
         if not geo.eclipsed:
             radiance, lit = target_radiance_w_m2_sr(
@@ -228,6 +250,10 @@ def stage_background(scene: Scene, tgt: geometry.TargetStage, hits: geometry.Hit
             seen[miss] = meets & (radiance[miss] > 0)
             earth_w[block.pixel] = radiance.sum(axis=1) * per_ray
             earth[block.pixel] = seen.any(axis=1)
+
+    # pieces of CHUNK_PIXELS pixels whatever the threads (the same sums), on the frame's threads
+    pieces = [piece for block in map(thinned, hits.blocks()) for piece in _pieces(block)]
+    parallel.map_threads(light, pieces)
     shape = (n, n)
     out = Background(
         power_w=(target_w + earth_w).reshape(shape),

@@ -70,6 +70,7 @@ def threads() -> int:
     return _threads
 
 
+_PREFIX = "simcore-pool"
 _pool = None
 _pool_size = 0
 _pool_lock = threading.Lock()
@@ -78,15 +79,16 @@ _pool_lock = threading.Lock()
 def map_threads(fn: Callable[[T], R], items: Sequence[T]) -> list[R]:
     """``[fn(x) for x in items]`` on the shared pool of ``threads()`` threads (kept alive between
     frames: starting threads per call costs more than small frames gain). Serial for one item or
-    one thread."""
+    one thread, and inside one of the pool's own threads (a nested call would wait for threads
+    that wait for it)."""
     global _pool, _pool_size
-    if len(items) <= 1 or _threads == 1:
+    if len(items) <= 1 or _threads == 1 or threading.current_thread().name.startswith(_PREFIX):
         return [fn(x) for x in items]
     with _pool_lock:
         if _pool is None or _pool_size != _threads:
             if _pool is not None:
                 _pool.shutdown(wait=False)
-            _pool = ThreadPoolExecutor(max_workers=_threads, thread_name_prefix="simcore")
+            _pool = ThreadPoolExecutor(max_workers=_threads, thread_name_prefix=_PREFIX)
             _pool_size = _threads
         pool = _pool
     return list(pool.map(fn, items))

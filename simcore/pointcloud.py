@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from . import parallel
 from .constants import C
 from .pulse import A_FWHM
 from .stage import Stage
@@ -171,18 +172,26 @@ def ground_truth(
     lit_index = np.asarray(lit_index, dtype=np.int64)
     range_m = np.asarray(range_m, dtype=np.float64)
     m = len(lit_index)
-    delay_s, _ = pixel_surfaces(
-        echo.arrivals_s[lit_index], echo.weights[lit_index], surface_gap_s(echo)
-    )
-    surface_m = 0.5 * C * delay_s
-    if m:
-        nearest = np.argmin(
-            np.where(np.isnan(surface_m), np.inf, np.abs(surface_m - range_m[:, None])), axis=1
-        )
-        true_m = surface_m[np.arange(m), nearest]
+    kernel = _kernel()
+    if kernel is not None:  # the same surfaces and sums per point, on the frame's threads
+        true_m = kernel.nearest_surface_m(
+            echo.arrivals_s, echo.weights, lit_index, range_m, surface_gap_s(echo), 0.5 * C,
+            parallel.threads(),
+        )  # fmt: skip
     else:
-        true_m = np.zeros(0)
-    face, cos_theta = _nearest_subray(hits, echo.pixel[lit_index], true_m)
+        delay_s, _ = pixel_surfaces(
+            echo.arrivals_s[lit_index], echo.weights[lit_index], surface_gap_s(echo)
+        )
+        surface_m = 0.5 * C * delay_s
+        if m:
+            nearest = np.argmin(
+                np.where(np.isnan(surface_m), np.inf, np.abs(surface_m - range_m[:, None])),
+                axis=1,
+            )
+            true_m = surface_m[np.arange(m), nearest]
+        else:
+            true_m = np.zeros(0)
+    face, cos_theta = _nearest_subray(hits, echo.pixel[lit_index], true_m, kernel)
     part = np.where(face >= 0, np.asarray(echo.model.face_part)[np.maximum(face, 0)], -1)
     error_m = range_m - true_m
     with np.errstate(invalid="ignore"):
@@ -197,9 +206,17 @@ def ground_truth(
     }
 
 
-def _nearest_subray(hits: Hits, pixel, range_m) -> tuple[np.ndarray, np.ndarray]:
+def _kernel():
+    """The compiled kernel (simcore.echo.kernel), or None on the numpy path."""
+    from .echo.features import compiled_kernel  # noqa: PLC0415  (numba, loaded on first use)
+
+    return compiled_kernel()
+
+
+def _nearest_subray(hits: Hits, pixel, range_m, kernel=None) -> tuple[np.ndarray, np.ndarray]:
     """For each of the pixels ``pixel`` (m,) (flat), the facet and abs(cos) of incidence of
-    its sub-ray whose hit lies nearest ``range_m`` (m,) [m] (-1 and NaN if none hit)."""
+    its sub-ray whose hit lies nearest ``range_m`` (m,) [m] (-1 and NaN if none hit); with the
+    compiled ``kernel`` the nearest sub-ray is found per point on the frame's threads."""
     face = np.full(len(pixel), -1, dtype=np.int64)
     cos_theta = np.full(len(pixel), np.nan)
     for block in hits.blocks():
@@ -209,8 +226,11 @@ def _nearest_subray(hits: Hits, pixel, range_m) -> tuple[np.ndarray, np.ndarray]
         mine = np.flatnonzero(block.pixel[row] == pixel)
         if not len(mine):
             continue
-        r = block.range_m[row[mine]]
-        k = np.argmin(np.abs(np.where(np.isfinite(r), r, np.inf) - range_m[mine, None]), axis=1)
+        if kernel is not None:
+            k = kernel.nearest_column(block.range_m, row[mine], range_m[mine], parallel.threads())
+        else:
+            r = block.range_m[row[mine]]
+            k = np.argmin(np.abs(np.where(np.isfinite(r), r, np.inf) - range_m[mine, None]), axis=1)
         take = (row[mine], k)
         face[mine] = block.face[take]
         cos_theta[mine] = block.cos_theta[take]

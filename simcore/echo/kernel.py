@@ -29,7 +29,15 @@ from numba import prange
 
 from ..cache import cache_dir
 
-__all__ = ["echo_features", "jit", "lock", "sample_echoes", "set_threads"]
+__all__ = [
+    "echo_features",
+    "jit",
+    "lock",
+    "nearest_column",
+    "nearest_surface_m",
+    "sample_echoes",
+    "set_threads",
+]
 
 if not numba.config.CACHE_DIR:  # $NUMBA_CACHE_DIR unset: the project's own cache folder
     _folder = cache_dir()
@@ -355,3 +363,97 @@ def sample_echoes(
             _sample_rows(*args)
     else:
         _sample_rows_serial(*args)
+
+
+@jit(parallel=True)
+def _nearest_surface(arrivals, weights, rows, range_m, gap_s, half_c, out):
+    """out[i]: the range (half_c x delay) of the surface of pixel rows[i] nearest range_m[i];
+    a pixel's surfaces are its lit elements sorted by delay (stable), a new one after each gap
+    over gap_s, each at its energy-weighted delay (pointcloud.pixel_surfaces); NaN if none."""
+    k_max = arrivals.shape[1]
+    for i in prange(len(rows)):
+        p = rows[i]
+        a = np.empty(k_max)
+        w = np.empty(k_max)
+        n = 0
+        for k in range(k_max):  # insertion sort of the lit elements: stable, as argsort's
+            if weights[p, k] > 0:
+                j = n
+                while j > 0 and a[j - 1] > arrivals[p, k]:
+                    a[j] = a[j - 1]
+                    w[j] = w[j - 1]
+                    j -= 1
+                a[j] = arrivals[p, k]
+                w[j] = weights[p, k]
+                n += 1
+        best = np.nan
+        best_d = np.inf
+        k = 0
+        while k < n:  # each surface: a run of elements without a gap over gap_s
+            weight = w[k]
+            moment = w[k] * a[k]
+            k += 1
+            while k < n and not a[k] - a[k - 1] > gap_s:
+                weight += w[k]
+                moment += w[k] * a[k]
+                k += 1
+            surface = half_c * (moment / weight)
+            d = abs(surface - range_m[i])
+            if d < best_d or (best_d == np.inf and np.isnan(best)):
+                best_d = d
+                best = surface
+        out[i] = best
+
+
+def nearest_surface_m(arrivals_s, weights, rows, range_m, gap_s, half_c, threads):
+    """(m,) the range [m] (``half_c`` x delay) of the surface of pixel ``rows[i]`` nearest
+    ``range_m[i]``: :func:`simcore.pointcloud.pixel_surfaces`'s surfaces and the nearest of them,
+    per point in parallel (the same sums in the same order: the same values).
+
+    arrivals_s, weights : (n, K) float64 (weight 0: no light); rows : (m,) int64 rows of them;
+    range_m : (m,) float64 [m]; gap_s : a new surface after a gap over this [s]."""
+    out = np.empty(len(rows))
+    set_threads(threads)
+    with lock:
+        _nearest_surface(
+            np.ascontiguousarray(arrivals_s, dtype=np.float64),
+            np.ascontiguousarray(weights, dtype=np.float64),
+            np.ascontiguousarray(rows, dtype=np.int64),
+            np.ascontiguousarray(range_m, dtype=np.float64), float(gap_s), float(half_c), out,
+        )  # fmt: skip
+    return out
+
+
+@jit(parallel=True)
+def _nearest_column(values, rows, target, out):
+    n_cols = values.shape[1]
+    for i in prange(len(rows)):
+        p = rows[i]
+        best = 0
+        best_d = np.inf
+        for k in range(n_cols):
+            v = values[p, k]
+            d = abs((v if np.isfinite(v) else np.inf) - target[i])
+            if np.isnan(d):  # numpy's argmin: the first NaN
+                best = k
+                break
+            if d < best_d:
+                best_d = d
+                best = k
+        out[i] = best
+
+
+def nearest_column(values, rows, target, threads) -> np.ndarray:
+    """(m,) int64: ``argmin_k |values[rows[i], k] - target[i]|`` (non-finite values as inf;
+    numpy's argmin: the first minimum, the first NaN if any), per row in parallel.
+
+    values : (n, K) float; rows : (m,) int64; target : (m,) float64."""
+    out = np.empty(len(rows), dtype=np.int64)
+    set_threads(threads)
+    with lock:
+        _nearest_column(
+            np.ascontiguousarray(values, dtype=np.float64),
+            np.ascontiguousarray(rows, dtype=np.int64),
+            np.ascontiguousarray(target, dtype=np.float64), out,
+        )  # fmt: skip
+    return out

@@ -8,7 +8,9 @@ from __future__ import annotations
 import numpy as np
 from scipy import special
 
+from ... import parallel
 from ...constants import C
+from ...echo.features import compiled_kernel
 from ..records import Outliers
 
 
@@ -131,6 +133,11 @@ def limited_stops(pixel, range_m, max_stops: int, holdoff_m: float) -> np.ndarra
     accepted = np.zeros(n, dtype=bool)
     if n == 0:
         return accepted
+    if compiled_kernel() is not None and np.isfinite(range_m).all():
+        from . import kernel  # noqa: PLC0415  (numba: loaded with the echo kernel)
+
+        # the same decisions, pixel by pixel on the frame's threads
+        return kernel.limited_stops(pixel, range_m, max_stops, holdoff_m, parallel.threads())
     order = np.lexsort((np.arange(n), range_m, pixel))
     p_sorted = pixel[order]
     first = np.ones(n, dtype=bool)

@@ -114,9 +114,11 @@ def noisy_band_limited(
     m = band.half_width
     n_cols = x.shape[1]
     taps = band.taps.astype(x.dtype)[None, :]
-    rows = np.flatnonzero((x > 0).any(axis=1)) if add_signal or noise else np.zeros(0, np.int64)
-    filtered = _filtered_signal(x, rows, band) if add_signal and len(rows) else None
     kernel = _noise_kernel() if noise and photon is None else None
+    # the rows with a signal (a pass over x: the kernel finds its shot noise's samples itself)
+    need_rows = add_signal or (noise and kernel is None)
+    rows = np.flatnonzero((x > 0).any(axis=1)) if need_rows else np.zeros(0, np.int64)
+    filtered = _filtered_signal(x, rows, band) if add_signal and len(rows) else None
     if kernel is not None:
         assert rng is not None and receiver is not None  # noise needs both
         r = kernel.white_step(dt, band.sigma_h_s)

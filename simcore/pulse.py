@@ -276,3 +276,10 @@ def scene_pulse_shape(scene: Scene) -> PulseShape:
     return pulse_shape(
         scene.laser.pulse_width_s, pulse_constant(scene), scene.detector.bandwidth_hz
     )
+
+
+def cfd_delay_s(shape: PulseShape, delay_s: float = 0.0) -> float:
+    """Eq. 19 default delay t_d = t_peak - t_half of the band-limited reference pulse (2.24 ns for
+    the paper's 5 ns pulse at 120 MHz): with a CFD fraction of 0.5 the CFD then fires when the
+    delayed copy is at half its peak, the instant of Eq. 31. A positive ``delay_s`` overrides it."""
+    return delay_s if delay_s > 0 else shape.t_peak_s - shape.t_half_s

@@ -11,8 +11,7 @@ import numpy as np
 
 from .. import geometry, materials
 from ..constants import C
-from ..pulse import PulseShape, default_time_step_s, scene_pulse_shape
-from ..receivers.lm_apd import timing
+from ..pulse import PulseShape, cfd_delay_s, default_time_step_s, scene_pulse_shape
 from ..scene import Scene
 from ..stage import Stage, readonly
 from ..target import TargetModel, with_materials
@@ -80,7 +79,7 @@ def stage_echo(scene: Scene, tgt: geometry.TargetStage, hits: geometry.Hits) -> 
     dt_s = scene.fidelity.time_step_s or default_time_step_s(
         scene.laser.pulse_width_s, scene.detector.bandwidth_hz
     )
-    t_d_s = timing.cfd_delay_s(shape, scene.timing.cfd_delay_s)
+    t_d_s = cfd_delay_s(shape, scene.timing.cfd_delay_s)
     blocks = [_echo_block(scene, model, b, shape, dt_s, t_d_s) for b in hits.blocks()]
     pixel = np.concatenate([b["pixel"] for b in blocks])
     order = np.argsort(pixel, kind="stable")
@@ -159,7 +158,7 @@ def _echo_block(
     facet_id = np.take_along_axis(face, strongest, axis=1)[:, 0]
     if block.spread_m is not None:  # each sub-ray's cell: a pair of half echoes +- its spread
         arrivals, weights = split_elements(arrivals, weights, 2.0 * block.spread_m[rows] / C)
-    window = scene.fidelity.merge_window * timing.rise_time_10_90_s(shape)
+    window = scene.fidelity.merge_window * shape.rise_time_10_90_s
     if window > 0 and arrivals.shape[1] > 2:
         arrivals, weights = merge_elements(arrivals, weights, window)
     feats = echo_features(

@@ -12,13 +12,7 @@ import numpy as np
 
 from ...constants import C
 from ...pulse import PulseShape
-
-
-def cfd_delay_s(shape: PulseShape, delay_s: float = 0.0) -> float:
-    """Eq. 19 default delay t_d = t_peak - t_half of the band-limited reference pulse (2.24 ns for
-    the paper's 5 ns pulse at 120 MHz): with a CFD fraction of 0.5 the CFD then fires when the
-    delayed copy is at half its peak, the instant of Eq. 31. A positive ``delay_s`` overrides it."""
-    return delay_s if delay_s > 0 else shape.t_peak_s - shape.t_half_s
+from ...pulse import cfd_delay_s as cfd_delay_s  # the pulse's own timing (the echo stage's too)
 
 
 def range_from_half_max_m(t_half_echo_s, t_half_ref_s: float):

@@ -20,14 +20,14 @@ import simcore
 from app.payloads import cloud, image, scene3d, stats, waveforms
 from app.runner import StaleRequest
 from app.state import MAX_SELECTED_PIXELS
-from simcore.receivers.gm_apd import frame as gm_frame
-from simcore.receivers.gm_apd.limits import BYTES_PER_EVENT, MAX_EVENTS
+from simcore import receivers
 
-# The server's budget for one frame. A Geiger-mode frame costs about 1.2 us of the two cores and
+# The server's budget for what one frame's receiver records (a receiver whose declaration
+# estimates it, ``frame_load``). A Geiger-mode frame costs about 1.2 us of the two cores and
 # 101 bytes per recorded avalanche (receiver and detection stages; 11.5 M avalanches took 14 s):
 # 8 M avalanches is about 10 s and 0.8 GB, the most one student's frame may take. One pixel's
 # avalanches in one gate are bounded by the core's own limit.
-MAX_FRAME_AVALANCHES = 8_000_000
+MAX_FRAME_RECORD_BYTES = 8_000_000 * 101
 
 # The memory one frame takes above what the engine holds, at most, per sub-ray of the base grid
 # and per pixel (the refinement of mixed pixels, the per-pixel arrays), bounding the peaks
@@ -85,23 +85,23 @@ class FrameRefused(ValueError):
 def check_budget(pipeline: simcore.Pipeline, scene: simcore.Scene) -> None:
     """Raise FrameRefused if ``scene``'s frame would exceed the server's budget. Called before
     each stage ``pipeline`` computes: once the echo and background stages of ``scene`` are
-    done (and the receiver is not), the Geiger-mode frame's avalanches are estimated exactly as
-    the core does before drawing them (``gm_frame.frame_avalanches``; and the core's own bounds,
-    ``gm_frame.frame_load``, so that no frame reaches its refusal)."""
-    if scene.receiver.kind != "gm_apd" or pipeline.cached("receiver", scene) is not None:
+    done (and the receiver is not), what the receiver will record is estimated as the core does
+    before drawing it (the declaration's ``frame_load``: for the Geiger-mode array its
+    avalanches, and whether the core's own bounds hold, so that no frame reaches its refusal)."""
+    frame_load = receivers.get(scene.receiver.kind).frame_load
+    if frame_load is None or pipeline.cached("receiver", scene) is not None:
         return
     echo = pipeline.cached("echo", scene)
     background = pipeline.cached("background", scene)
     if echo is None or background is None:
         return
-    total = gm_frame.frame_avalanches(scene, echo, background)
-    worst, bound = gm_frame.frame_load(scene, echo, background)  # the core's own limits
-    if total > MAX_FRAME_AVALANCHES or worst > gm_frame.MAX_EVENTS_PER_PULSE or bound > MAX_EVENTS:
+    load = receivers.resolve(frame_load)(scene, echo, background)
+    most = MAX_FRAME_RECORD_BYTES / load.bytes_each
+    if load.count > most or not load.within_core_limits:
         raise FrameRefused(
-            f"this frame would record about {total:.2g} avalanches "
-            f"({total * BYTES_PER_EVENT / 1e9:.2g} GB; at most {MAX_FRAME_AVALANCHES:,} per "
-            "frame here): lower the Pulses per frame, the Dark count rate or the Pixels, or "
-            "raise the Transmit attenuation or the Dead time"
+            f"this frame would record about {load.count:.2g} {load.units} "
+            f"({load.count * load.bytes_each / 1e9:.2g} GB; at most {most:,.0f} per "
+            f"frame here): {load.advice}"
         )
 
 

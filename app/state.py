@@ -1,26 +1,29 @@
 """The app's UI state: one typed dataclass in display units, the control ranges, and the
 sanitiser that turns whatever arrives from the page (or the websocket) into valid controls.
 
-Display units differ from the scene's SI units in three places: the pulse energy is shown in mJ
-(``pulse_energy_mj``), the filter width and the Geiger-mode dead time in nm and ns
-(``filter_width_nm``, ``gm_dead_time_ns``); every other name matches
+Display units differ from the scene's SI units in a few places: the pulse energy is shown in mJ
+(``pulse_energy_mj``), the filter width in nm (``filter_width_nm``); every other name matches
 the scene's quick parameters (``pitch_deg``, ``azimuth_deg``, ``distance_m``, ``pixels``, ``tnr``,
-``seed``) or its keys with the section's dot as an underscore (``sun_azimuth_deg``).
+``seed``) or its keys with the section's dot as an underscore (``sun_azimuth_deg``). The
+receivers' own controls come from their declarations (``simcore.receivers``: each control's
+state name, scene key, unit and the factor between them, e.g. the Geiger-mode dead time in ns,
+``gm_dead_time_ns``).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 import simcore
+from simcore import receivers
 
 COLOR_BY = ("range", "snr", "outlier", "range_error", "part")
 IMAGE_KINDS = ("range", "peak_power", "background", "multi_peak")
 SUN_MODES = ("none", "manual", "orbit")  # sun.mode: the paper's dark sky, given, from the orbit
-RECEIVER_KINDS = ("lm_apd", "gm_apd")  # receiver.kind: linear-mode or Geiger-mode array
 SUBRAY_CHOICES = (1, 4, 16, 64)
 # fidelity presets of the core, plus "custom": the scene's fidelity with ``subrays`` sub-rays
 PRESET_CHOICES = (*simcore.PRESETS, "custom")
@@ -49,7 +52,7 @@ class ControlSpec:
 
 
 # The quick controls, in the order the page shows them.
-SPECS: dict[str, ControlSpec] = {
+_SHARED_SPECS: dict[str, ControlSpec] = {
     "pitch_deg": ControlSpec("Pitch", "deg", -90.0, 90.0, 1.0),
     "azimuth_deg": ControlSpec("Azimuth", "deg", -180.0, 180.0, 1.0),
     "distance_m": ControlSpec("Distance", "m", 20.0, 5000.0, 1.0, log_slider=True),
@@ -60,12 +63,48 @@ SPECS: dict[str, ControlSpec] = {
     "sun_azimuth_deg": ControlSpec("Sun azimuth", "deg", -180.0, 180.0, 1.0),
     "sun_elevation_deg": ControlSpec("Sun elevation", "deg", -90.0, 90.0, 1.0),
     "filter_width_nm": ControlSpec("Filter width", "nm", 0.1, 100.0, 0.1, log_slider=True),
-    "gm_pde": ControlSpec("Photon detection efficiency", "", 0.01, 1.0, 0.01),
-    "gm_dark_count_rate_hz": ControlSpec("Dark count rate", "Hz", 1.0, 1e8, 1.0, log_slider=True),
-    "gm_dead_time_ns": ControlSpec("Dead time", "ns", 1.0, 1e5, 1.0, log_slider=True),
-    "gm_pulses": ControlSpec("Pulses per frame", "", 1, 1000, 1, integer=True),
-    "gm_attenuation_db": ControlSpec("Transmit attenuation", "dB", 0.0, 100.0, 1.0),
 }
+
+
+def receiver_controls() -> dict[str, receivers.Control]:
+    """Every registered receiver's own controls (its declaration's), by state name."""
+    return {c.name: c for r in receivers.receivers() for c in r.controls}
+
+
+def display_per_si(control: receivers.Control) -> float:
+    """The factor from a receiver control's scene unit to its display unit (1e9: s to ns)."""
+    return float(f"{1.0 / control.scale:.15g}")
+
+
+def receiver_control_default(control: receivers.Control) -> float:
+    """A receiver control's default: its key's, in display units."""
+    section, name = control.key.split(".", 1)
+    value = getattr(receivers.sections()[section](), name)
+    return value if control.scale == 1.0 else value * display_per_si(control)
+
+
+class Specs(Mapping[str, ControlSpec]):
+    """The numeric controls, state name -> ControlSpec: the shared ones, then each registered
+    receiver's (read from the registry at each use)."""
+
+    def _all(self) -> dict[str, ControlSpec]:
+        own = {
+            c.name: ControlSpec(c.label, c.unit, c.lo, c.hi, c.step, c.integer, c.log_slider)
+            for c in receiver_controls().values()
+        }
+        return {**_SHARED_SPECS, **own}
+
+    def __getitem__(self, key: str) -> ControlSpec:
+        return self._all()[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._all())
+
+    def __len__(self) -> int:
+        return len(self._all())
+
+
+SPECS = Specs()
 
 
 @dataclass(frozen=True)
@@ -89,21 +128,44 @@ class Controls:
     sun_azimuth_deg: float = 0.0
     sun_elevation_deg: float = 30.0
     filter_width_nm: float = 1.0
-    receiver_kind: str = "lm_apd"
-    gm_pde: float = 0.3
-    gm_dark_count_rate_hz: float = 1e4
-    gm_dead_time_ns: float = 1000.0
-    gm_pulses: int = 100
-    gm_attenuation_db: float = 50.0
+    receiver_kind: str = receivers.DEFAULT_KIND
+    # the receivers' own controls (their declarations'), (state name, value) pairs set to other
+    # than their defaults, in name order; read as attributes (``controls.gm_pulses``)
+    receiver_values: tuple[tuple[str, float], ...] = ()
+
+    def __getattr__(self, name: str) -> Any:
+        """A receiver's control (``gm_pulses``): its value as set, else its default."""
+        if name.startswith("__") or name == "receiver_values":
+            raise AttributeError(name)
+        control = receiver_controls().get(name)
+        if control is None:
+            raise AttributeError(f"'Controls' object has no attribute {name!r}")
+        return dict(self.receiver_values).get(name, receiver_control_default(control))
+
+    def replace(self, **changes: Any) -> Controls:
+        """A copy with ``changes``, fields or receivers' controls (``gm_pulses=20``) alike."""
+        own = {k: changes.pop(k) for k in list(changes) if k in receiver_controls()}
+        if own:
+            changes["receiver_values"] = _receiver_values({**dict(self.receiver_values), **own})
+        return dataclasses.replace(self, **changes)
 
     def as_state(self) -> dict[str, Any]:
         """The trame state entries of these controls."""
         out = dataclasses.asdict(self)
         out["materials"] = dict(self.materials)
+        del out["receiver_values"]
+        out.update({name: getattr(self, name) for name in receiver_controls()})
         return out
 
 
-STATE_KEYS = tuple(f.name for f in dataclasses.fields(Controls))
+def state_keys() -> tuple[str, ...]:
+    """The state entries of the controls: the fields, then every registered receiver's controls
+    (the app reads them when it starts: a receiver registers before)."""
+    shared = tuple(f.name for f in dataclasses.fields(Controls) if f.name != "receiver_values")
+    return (*shared, *receiver_controls())
+
+
+STATE_KEYS = state_keys()
 
 
 def controls_from_scene(
@@ -131,12 +193,11 @@ def controls_from_scene(
         "sun_elevation_deg": scene.sun.elevation_deg,
         "filter_width_nm": scene.receive.filter_width_m * 1e9,
         "receiver_kind": scene.receiver.kind,
-        "gm_pde": scene.gm.pde,
-        "gm_dark_count_rate_hz": scene.gm.dark_count_rate_hz,
-        "gm_dead_time_ns": scene.gm.dead_time_s * 1e9,
-        "gm_pulses": scene.gm.pulses,
-        "gm_attenuation_db": scene.gm.attenuation_db,
     }
+    for name, control in receiver_controls().items():
+        section, key = control.key.split(".", 1)
+        value = getattr(getattr(scene, section), key)
+        raw[name] = value if control.scale == 1.0 else value * display_per_si(control)
     return sanitize_controls(raw, Controls(materials=dict(part_materials)))
 
 
@@ -235,7 +296,7 @@ def sanitize_controls(raw: dict[str, Any], previous: Controls) -> tuple[Controls
         ("color_by", "Colour points by", COLOR_BY),
         ("image_kind", "Array image", IMAGE_KINDS),
         ("sun_mode", "Sun", SUN_MODES),
-        ("receiver_kind", "Receiver", RECEIVER_KINDS),
+        ("receiver_kind", "Receiver", receivers.kinds()),
     )
     for key, label, options in choices:
         old = getattr(previous, key)
@@ -244,4 +305,15 @@ def sanitize_controls(raw: dict[str, Any], previous: Controls) -> tuple[Controls
     materials = raw.get("materials", previous.materials)
     values["materials"], msgs = _materials(materials, previous.materials)
     messages += msgs
+    own = receiver_controls()
+    values["receiver_values"] = _receiver_values(
+        {k: values.pop(k) for k in list(values) if k in own}
+    )
     return Controls(**values), messages
+
+
+def _receiver_values(chosen: dict[str, float]) -> tuple[tuple[str, float], ...]:
+    """``Controls.receiver_values`` of the receivers' controls ``chosen``: those not at their
+    defaults, in name order (so that equal controls compare equal)."""
+    own = receiver_controls()
+    return tuple(sorted((k, v) for k, v in chosen.items() if v != receiver_control_default(own[k])))

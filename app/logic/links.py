@@ -25,7 +25,7 @@ from __future__ import annotations
 import urllib.parse
 from typing import Any
 
-from app.state import SPECS, Controls, echo, sanitize_controls
+from app.state import SPECS, Controls, echo, receiver_controls, sanitize_controls
 
 MAX_LINK_SETTINGS = 64  # a longer query is refused whole
 MATERIAL_PREFIX = "target.materials."
@@ -35,11 +35,8 @@ LINK_NAMES = {key: (key, 1.0) for key in SPECS} | {
     "sun_azimuth_deg": ("sun.azimuth_deg", 1.0),
     "sun_elevation_deg": ("sun.elevation_deg", 1.0),
     "filter_width_nm": ("receive.filter_width_m", 1e-9),
-    "gm_pde": ("gm.pde", 1.0),
-    "gm_dark_count_rate_hz": ("gm.dark_count_rate_hz", 1.0),
-    "gm_dead_time_ns": ("gm.dead_time_s", 1e-9),
-    "gm_pulses": ("gm.pulses", 1.0),
-    "gm_attenuation_db": ("gm.attenuation_db", 1.0),
+    # the receivers' own controls, by their scene keys (their declarations')
+    **{name: (c.key, c.scale) for name, c in receiver_controls().items()},
 }
 CONTROL_OF = {name: (key, factor) for key, (name, factor) in LINK_NAMES.items()}
 # link name -> control

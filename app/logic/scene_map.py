@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import simcore
-from app.state import Controls
+from app.state import Controls, receiver_controls
 from simcore.target import with_materials
 
 
@@ -24,12 +24,23 @@ def scene_overrides(controls: Controls) -> dict[str, object]:
         "sun.elevation_deg": float(controls.sun_elevation_deg),
         "receive.filter_width_m": float(controls.filter_width_nm) * 1e-9,
         "receiver.kind": controls.receiver_kind,
-        "gm.pde": float(controls.gm_pde),
-        "gm.dark_count_rate_hz": float(controls.gm_dark_count_rate_hz),
-        "gm.dead_time_s": float(controls.gm_dead_time_ns) * 1e-9,
-        "gm.pulses": int(controls.gm_pulses),
-        "gm.attenuation_db": float(controls.gm_attenuation_db),
+        **receiver_overrides(controls),
     }
+
+
+def receiver_overrides(controls: Controls) -> dict[str, object]:
+    """Every registered receiver's controls as scene keys (their declarations': display units
+    times the control's scale; whole numbers stay whole)."""
+    out: dict[str, object] = {}
+    for name, control in receiver_controls().items():
+        value = getattr(controls, name)
+        if control.integer:
+            out[control.key] = int(value)
+        else:
+            out[control.key] = (
+                float(value) * control.scale if control.scale != 1.0 else float(value)
+            )
+    return out
 
 
 def fidelity_overrides(controls: Controls) -> dict[str, object]:

@@ -10,6 +10,7 @@ import simcore
 from app.payloads.charts import base_layout, note, vline
 from app.payloads.encode import si_text
 from app.payloads.style import SNR_FLOOR
+from simcore import receivers
 
 
 def stats_rows(summary: dict) -> list[dict]:
@@ -57,29 +58,41 @@ def with_chance_misses(rows: list[dict], result: simcore.Result) -> list[dict]:
     return rows + [row] if at is None else [*rows[: at + 1], row, *rows[at + 1 :]]
 
 
-def _is_gm(summary: dict) -> bool:
-    return summary.get("receiver_kind", "lm_apd") == "gm_apd"
+def _declared(summary: dict) -> receivers.Receiver:
+    """The declaration of the frame's receiver (its stats rows and the words for its SNR)."""
+    return receivers.get(summary.get("receiver_kind", receivers.DEFAULT_KIND))
 
 
 def _snr_label(summary: dict) -> str:
-    """The SNR row's name: a Geiger-mode frame's SNR is its counts', not one flash's."""
-    return "Median count SNR S/√(S+B) (frame)" if _is_gm(summary) else "Median SNR"
+    """The SNR row's name: the receiver's (a Geiger-mode frame's SNR is its counts', not one
+    flash's)."""
+    return _declared(summary).snr_stats_label
 
 
 def _receiver_rows(summary: dict) -> list[dict]:
-    """The receiver, and for a Geiger-mode array its frame's photon figures."""
-    if not _is_gm(summary):
-        return [{"label": "Receiver", "value": "linear-mode APD array"}]
-    figures = summary.get("noise_figures") or {}
-    pulses = ((summary.get("scene") or {}).get("gm") or {}).get("pulses")
-    rows = [{"label": "Receiver", "value": f"Geiger-mode array, {pulses} pulses"}]
-    if "signal_pe_median" in figures:
-        rows.append(
-            {"label": "Echo photoelectrons / pulse", "value": f"{figures['signal_pe_median']:.3g}"}
-        )
-    if "events" in figures:
-        rows.append({"label": "Avalanches in the frame", "value": f"{figures['events']:,.0f}"})
+    """The receiver, and the rows its declaration adds (the Geiger-mode array's frame's photon
+    figures): each row's text formatted from the summary's ``scene`` and noise figures
+    (``noise``), left out where a figure it needs is missing."""
+    declared = _declared(summary)
+    fields = {
+        "scene": summary.get("scene") or {},
+        "noise": summary.get("noise_figures") or {},
+        "summary": summary,
+    }
+    rows = [{"label": "Receiver", "value": _format(declared.description, fields) or declared.kind}]
+    for row in declared.stats_rows:
+        value = _format(row.text, fields)
+        if value is not None:
+            rows.append({"label": row.label, "value": value})
     return rows
+
+
+def _format(text: str, fields: dict) -> str | None:
+    """``text`` formatted from ``fields``; None where a value it names is missing."""
+    try:
+        return text.format(**fields)
+    except (KeyError, IndexError, TypeError, ValueError):
+        return None
 
 
 def _background_rows(summary: dict) -> list[dict]:
@@ -132,8 +145,8 @@ def snr_histogram(result: simcore.Result) -> dict:
     snr = np.asarray(result.receiver.snr, dtype=np.float64)
     snr = snr[np.isfinite(snr) & (snr > 0)]
     tnr = result.scene.timing.tnr
-    gm = result.scene.receiver.kind == "gm_apd"
-    title = "count SNR S/√(S+B) (log scale)" if gm else "SNR (log scale)"
+    declared = receivers.get(result.scene.receiver.kind)
+    title = f"{declared.snr_name} (log scale)"
     layout = base_layout(title, "pixels", bargap=0.0, showlegend=False)
     layout["margin"] = {"l": 48, "r": 8, "t": 8, "b": 38}
     if snr.size == 0:
@@ -158,7 +171,7 @@ def snr_histogram(result: simcore.Result) -> dict:
         "customdata": (10**centres).tolist(),
         "hovertemplate": "SNR ≈ %{customdata:.3g}: %{y} pixels<extra></extra>",
     }
-    if gm:  # the threshold is in counts (from TNR's false-alarm rate), not on this axis
+    if not declared.threshold_on_snr_axis:  # e.g. in counts (from TNR's false-alarm rate)
         return {"data": [bars], "layout": layout}
     layout["shapes"] = [vline(math.log10(tnr), "#d62728")]
     layout["annotations"] = [

@@ -10,6 +10,7 @@ import simcore
 from app.payloads import encode, photons
 from app.payloads.charts import base_layout, detection_text, note, range_axis, time_axis, vline
 from app.payloads.style import SELECTION_COLORS
+from simcore import receivers
 from simcore.constants import C as C_M_S
 
 
@@ -159,10 +160,11 @@ def _detected_time_ns(w: simcore.Waveform) -> float | None:
 def waveform_figure(result: simcore.Result, selection: list) -> dict:
     """The plotly figure of the selected pixels' echoes (several pixels overlaid): received power
     vs time since emission, the emitted pulse for reference, the half-maximum marks, the
-    threshold and the detected ranges. A Geiger-mode frame gets the photon-count histograms
-    instead (app.payloads.photons)."""
-    if result.scene.receiver.kind == "gm_apd":
-        return photons.photon_figure(result, selection)
+    threshold and the detected ranges. A receiver whose declaration asks for another chart gets
+    it (``counts``: the photon-count histograms of app.payloads.photons)."""
+    chart = CHARTS.get(receivers.get(result.scene.receiver.kind).chart)
+    if chart is not None:
+        return chart(result, selection)
     waves = [result.waveform(int(r), int(c)) for r, c in selection]
     peak = max([float(np.max(w.power_w)) for w in waves if len(w.power_w)] + [0.0])
     threshold_w = waves[0].threshold_w if waves else float("nan")
@@ -244,31 +246,19 @@ def waveform_figure(result: simcore.Result, selection: list) -> dict:
     return {"data": data, "layout": layout}
 
 
-# What the chart's caption and title say, by receiver kind (the page shows the frame's)
-VIEW_TEXT = {
-    "lm_apd": {
-        "waveform_title": "Echo waveforms of the selected pixels",
-        "waveform_caption": "solid: received (band-limited) · dotted: unfiltered · dashed: "
-        "emitted pulse delayed by 2R/c · ◆ half-maximum time · vertical line: detected range · "
-        "dash-dot: threshold (TNR × σn) · by day, orange: the background and the noise band "
-        "(on a right-hand axis when too small to see beside the echo)",
-        "snr_caption": "SNR of the pixels with an echo (one flash; the red line: TNR)",
-    },
-    "gm_apd": {
-        "waveform_title": "Photon counts of the selected pixels",
-        "waveform_caption": "bars: avalanches counted per time bin over the frame's pulses · "
-        "solid step: the counts expected from the same pulses (dead time and jitter included) "
-        "· dotted: the photons arriving without dead time (right axis when larger): where "
-        "they part, pile-up · top axis: the range c t / 2",
-        "snr_caption": "Count SNR S / √(S + B) of the pixels with an echo (the frame's expected "
-        "counts in the peak window)",
-    },
-}
+# the pixel charts a receiver's declaration may ask for besides the echo waveform (``chart``)
+CHARTS = {"counts": photons.photon_figure}
 
 
 def view_text(kind: str) -> dict[str, str]:
-    """The waveform chart's title and caption and the SNR chart's caption for a receiver."""
-    return VIEW_TEXT.get(kind, VIEW_TEXT["lm_apd"])
+    """The waveform chart's title and caption and the SNR chart's caption for a receiver, from
+    its declaration (the caption lists its chart's series)."""
+    declared = receivers.get(kind)
+    return {
+        "waveform_title": declared.chart_title,
+        "waveform_caption": " · ".join(s.text() for s in declared.chart_series),
+        "snr_caption": declared.snr_caption,
+    }
 
 
 def _background_traces(waves: list, tnr: float, times: list, scale: float) -> list[dict]:

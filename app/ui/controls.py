@@ -14,6 +14,7 @@ from app.state import PRESET_CHOICES, SPECS, SUBRAY_CHOICES, ControlSpec
 from app.ui import design, flyaround, glossary, lessons
 from app.ui.upload import upload_panel
 from app.ui.widgets import a11y_attributes, button_toggle, html_attributes, labelled_toggle
+from simcore import receivers
 
 SHARE_URL = "trame.utils.lmapdLink ? trame.utils.lmapdLink.url(share_query) : ''"
 SLOW_RAYS = 2e6  # rays per flash above which the page warns that updates take seconds
@@ -349,30 +350,25 @@ def sunlight() -> None:
 
 
 def receiver_choice() -> None:
-    """The receiver: the paper's linear-mode APD array or a Geiger-mode (single-photon) array
-    with its own parameters; the chart then shows photon-count histograms."""
+    """The receiver: one button per registered receiver (the paper's linear-mode APD array, a
+    Geiger-mode single-photon array, ...), and under it the selected one's own controls and
+    caption, all from its declaration (``simcore.receivers``)."""
+    declared = receivers.receivers()
     _explained_toggle(
         "Receiver",
         "receiver_kind",
-        [("Linear mode", "lm_apd", "receiver-lm"), ("Geiger mode", "gm_apd", "receiver-gm")],
+        [(r.label or r.kind, r.kind, f"receiver-{r.short or r.kind}") for r in declared],
     )
-    with html.Div(v_show="receiver_kind === 'gm_apd'", classes="gm-controls"):
-        for key in (
-            "gm_pde",
-            "gm_dark_count_rate_hz",
-            "gm_dead_time_ns",
-            "gm_pulses",
-            "gm_attenuation_db",
+    for r in declared:
+        if not r.controls:
+            continue
+        with html.Div(
+            v_show=f"receiver_kind === '{r.kind}'", classes=f"{r.short or r.kind}-controls"
         ):
-            slider(key)
-        html.Div(
-            "Each pixel counts single photons over the pulses (dead time re-armed at each gate); "
-            "click a pixel to see its histogram against the counts expected without dead time. "
-            "TNR sets the count threshold's false-alarm rate. The transmit attenuation keeps the "
-            "pixels photon-starved (under one photoelectron a pulse): brighter echoes pile up "
-            "and range early.",
-            classes="text-caption hint",
-        )
+            for control in r.controls:
+                slider(control.name)
+            if r.hint:
+                html.Div(r.hint, classes="text-caption hint")
 
 
 def section(title: str) -> None:

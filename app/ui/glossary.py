@@ -7,7 +7,9 @@ from __future__ import annotations
 from trame.widgets import html
 from trame.widgets import vuetify3 as v3
 
+from app.state import receiver_controls
 from app.ui.widgets import html_attributes
+from simcore import receivers
 
 # term -> what it means here, in a sentence or two a student can read at the slider
 GLOSSARY: dict[str, str] = {
@@ -73,16 +75,15 @@ CONTROL_TERMS: dict[str, tuple[str, ...]] = {
     "sun_azimuth_deg": ("Background light",),
     "sun_elevation_deg": ("Background light",),
     "filter_width_nm": ("Filter width", "Background light"),
-    "gm_pde": ("PDE",),
-    "gm_dark_count_rate_hz": ("Dark count",),
-    "gm_dead_time_ns": ("Dead time", "Pile-up"),
-    "gm_pulses": ("Pulses per frame",),
-    "gm_attenuation_db": ("Transmit attenuation", "Pile-up"),
     "receiver_kind": ("SNR", "Pile-up"),
     "sun_mode": ("Background light",),
     "preset": ("Fidelity",),
     "color_by": ("Range", "SNR", "Outlier"),
+    # the receivers' own controls: the terms their declarations name
+    **{name: c.terms for name, c in receiver_controls().items() if c.terms},
 }
+# and the terms the receivers' declarations explain
+GLOSSARY.update({term: text for r in receivers.receivers() for term, text in r.glossary})
 
 
 def control_text(key: str) -> str:

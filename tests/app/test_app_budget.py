@@ -14,9 +14,11 @@ from hypothesis import strategies as st
 from support.app_helpers import change, small_app
 
 import simcore
-from app.engine import MAX_FRAME_AVALANCHES
-from app.state import PRESET_CHOICES, RECEIVER_KINDS, SPECS, SUN_MODES
+from app.engine import MAX_FRAME_RECORD_BYTES
+from app.state import PRESET_CHOICES, SPECS, SUN_MODES
+from simcore import receivers
 from simcore.receivers.gm_apd import frame as gm_frame
+from simcore.receivers.gm_apd.limits import BYTES_PER_EVENT
 
 
 @pytest.fixture(scope="module")
@@ -85,7 +87,7 @@ CONTROL_VALUES = {
 } | {
     "pixels": st.sampled_from([16, 32, 48]),
     "seed": st.integers(0, 3),
-    "receiver_kind": st.sampled_from(RECEIVER_KINDS),
+    "receiver_kind": st.sampled_from(receivers.kinds()),
     "sun_mode": st.sampled_from(SUN_MODES),
     "preset": st.sampled_from([p for p in PRESET_CHOICES if p != "custom"]),
 }
@@ -110,7 +112,7 @@ def test_any_combination_of_the_controls_answers_without_a_traceback(app, caplog
         assert message.startswith(("Refused:", "Simulation failed:")), message
     frame = app.logic.last_frame
     if frame is not None and frame.result.scene.receiver.kind == "gm_apd":
-        assert len(frame.result.receiver.events) < 1.2 * MAX_FRAME_AVALANCHES
+        assert len(frame.result.receiver.events) < 1.2 * MAX_FRAME_RECORD_BYTES / BYTES_PER_EVENT
 
 
 def test_a_frame_no_longer_wanted_stops_while_its_avalanches_are_drawn():

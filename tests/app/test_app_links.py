@@ -53,9 +53,7 @@ def test_a_link_uses_the_command_lines_names_in_si_units(initial):
 
 
 def test_a_link_is_short_and_its_values_carry_no_float_noise(initial):
-    controls = dataclasses.replace(
-        initial, receiver_kind="gm_apd", gm_dead_time_ns=1001.0, distance_m=730.0
-    )
+    controls = initial.replace(receiver_kind="gm_apd", gm_dead_time_ns=1001.0, distance_m=730.0)
     query = link_query(controls, initial)
     assert query == "distance_m=730&gm.dead_time_s=1.001e-06&receiver.kind=gm_apd"
     back, messages = controls_from_link(dict(urllib.parse.parse_qsl(query)), initial)
@@ -103,7 +101,7 @@ def test_every_slider_value_gives_the_same_scene_after_the_round_trip(initial, k
     base = simcore.load_scene()
     rng = np.random.default_rng(3)
     for value in (float(f"{v:.3g}") for v in 10 ** rng.uniform(np.log10(lo), np.log10(hi), 2000)):
-        controls = dataclasses.replace(initial, **{key: value})
+        controls = initial.replace(**{key: value})
         back, messages = controls_from_link(link_settings(controls, initial), initial)
         section, name = si.split(".")
         want = getattr(getattr(scene_from_controls(base, controls), section), name)

@@ -262,7 +262,6 @@ SIMCORE_FLOORS = (
         "simcore.echo",
         "simcore.background",
         "simcore.receivers",
-        "simcore.gross_errors",
     ),
     # the point cloud and its quality against the ground truth
     ("simcore.pointcloud", "simcore.quality"),

@@ -27,7 +27,7 @@ PRELOAD = [
     "simcore.io",
     "simcore.echo.kernel",
     "simcore.receivers.lm_apd.receiver",
-    "simcore.gross_errors",
+    "simcore.receivers.lm_apd.gross_errors",
 ]
 WAIT_S = 120.0
 

@@ -17,9 +17,9 @@ from support.mc_scene import DT, K_ATT, RX, SHAPE, T_D, E
 
 import simcore
 from simcore import background, echo
-from simcore import gross_errors as gross
 from simcore.echo import EchoStage
 from simcore.receivers.lm_apd import detection
+from simcore.receivers.lm_apd import gross_errors as gross
 from simcore.receivers.lm_apd import receiver as lm_apd
 
 C = sc.c

@@ -237,7 +237,7 @@ def _gross_errors(scene, echo, rx: LmApdResponse, r_true_m, r_meas_m, drawn, hol
     flash do not move. The Monte Carlo's table is computed (and cached) only when a drawn echo
     is in its SNR range."""
     t = scene.timing
-    from ... import gross_errors as gross  # noqa: PLC0415  (only when needed)
+    from . import gross_errors as gross  # noqa: PLC0415  (only when needed)
 
     in_range = drawn & (rx.snr <= gross.snr_grid(t.tnr + gross.TNR_STEP)[-1])
     if not in_range.any():

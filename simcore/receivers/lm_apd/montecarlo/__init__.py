@@ -41,7 +41,7 @@ scripts/plot_mc_agreement.py):
 - Gross errors: near the threshold the discriminator arms on a noise-lifted onset (the CFD then
   fires up to 0.6 m early) or on the trailing edge (0.3-0.45 m late): about 1 % of the stops at
   SNR 6, TNR 5. The statistical model draws them from a table this model makes
-  (``simcore.gross_errors``, docs/physics.md#gross-errors).
+  (``simcore.receivers.lm_apd.gross_errors``, docs/physics.md#gross-errors).
 
 Every pixel of the array is simulated over the whole gate, lit or not, in chunks of pixels whose
 working set is at most ``max_bytes`` per worker thread, so memory stays bounded whatever the pixel

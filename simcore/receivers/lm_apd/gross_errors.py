@@ -38,10 +38,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .cache import cache_dir, write_atomically
-from .constants import C
-from .pulse import pulse_shape
-from .receivers.lm_apd.apd import ReceiverModel
+from ...cache import cache_dir, write_atomically
+from ...constants import C
+from ...pulse import pulse_shape
+from .apd import ReceiverModel
 
 GROSS_SIGMAS = 4.0  # a stop this many Eq. 24 sigmas from the true range is a gross error
 GRID_BELOW_TNR = 2.0  # the SNR grid starts this far below the TNR (at 1 at least)...
@@ -94,8 +94,8 @@ def single_surface_sigma_m(
 ) -> np.ndarray:
     """(m,) Eq. 24 (ours: Eq. 25 per sample, Eq. 26) of single-surface echoes of peak currents
     ``i_pk_a`` [m], as the statistical model computes it."""
-    from .echo import echo_features  # noqa: PLC0415
-    from .receivers.lm_apd import timing  # noqa: PLC0415
+    from ...echo import echo_features  # noqa: PLC0415
+    from . import timing  # noqa: PLC0415
 
     feats = echo_features(shape, np.zeros((1, 1)), np.ones((1, 1)), dt_s, t_d_s, cfd_fraction)
     level, slope = feats.cfd_shot_level[0], feats.cfd_slope_per_s[0]
@@ -186,8 +186,8 @@ def _entry(folder: Path, args: tuple) -> Path:
     digest = hashlib.sha256()
     for source in (
         here / "gross_errors.py",
-        here / "pulse.py",
-        *sorted((here / "receivers" / "lm_apd" / "montecarlo").glob("*.py")),
+        here.parent.parent / "pulse.py",
+        *sorted((here / "montecarlo").glob("*.py")),
     ):
         digest.update(source.read_bytes())
     receiver, *numbers = args
@@ -225,7 +225,7 @@ def calibrate(
     holdoff_s: float,
 ) -> GrossErrors:
     """Compute the gross-error table (module docstring) by the waveform Monte Carlo."""
-    from .receivers.lm_apd.montecarlo.gate import montecarlo_gate  # noqa: PLC0415
+    from .montecarlo.gate import montecarlo_gate  # noqa: PLC0415
 
     shape = pulse_shape(tau_s, a, bandwidth_hz)
     snrs = snr_grid(tnr)

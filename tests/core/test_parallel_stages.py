@@ -83,3 +83,17 @@ def test_a_map_inside_the_pools_threads_runs_serially_instead_of_waiting_forever
     finally:
         parallel.set_threads(before)
     assert out == [[[i * j for j in range(4)] for i in range(4)]]
+
+
+def test_openmps_threads_sleep_after_a_region_unless_the_user_says_otherwise():
+    import os
+    import subprocess
+    import sys
+
+    code = "import os, simcore.echo.kernel; print(os.environ['OMP_WAIT_POLICY'])"
+    env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
+    run = lambda e: subprocess.run(  # noqa: E731
+        [sys.executable, "-c", code], env=e, capture_output=True, text=True, check=True
+    ).stdout.strip()
+    assert run(env) == "PASSIVE"
+    assert run({**env, "OMP_WAIT_POLICY": "ACTIVE"}) == "ACTIVE"

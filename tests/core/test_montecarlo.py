@@ -555,3 +555,22 @@ def test_the_noise_filter_is_the_sampled_convolution_of_the_impulses():
     assert np.max(np.abs(y - direct)) < 1e-6 * np.abs(direct).max()
     # the row scale multiplies the impulses
     np.testing.assert_allclose(white[1, ::r].std() / white[0, ::r].std(), 2.0, rtol=0.1)
+
+
+def test_rows_whose_noise_stays_below_their_level_keep_x_without_the_white_noise():
+    """The gate writes the white noise into x only where the continuous comparator may read it:
+    y is the same either way, and x too wherever it is written."""
+    band = montecarlo.band_limit(DT, B)
+    r = mc_noise.white_step(DT, band.sigma_h_s)
+    m = band.half_width
+    x = np.zeros((4, 2000 + 2 * m), dtype=np.float32)
+    x[3, 900:950] = 40 * RX.sigma_n_a  # a signal row: always written
+    every, some = x.copy(), x.copy()
+    scale = np.ones(4)
+    y_every = mc_noise.noise_rows(every, 5, 0, scale, 1e-6, band.taps, r)
+    top = y_every.max(axis=1)
+    level = np.array([top[0] + 1.0, top[1], np.inf, np.inf])  # above, at, never, signal
+    y_some = mc_noise.noise_rows(some, 5, 0, scale, 1e-6, band.taps, r, level)
+    np.testing.assert_array_equal(y_some, y_every)
+    assert not some[0].any() and not some[2].any()
+    np.testing.assert_array_equal(some[[1, 3]], every[[1, 3]])

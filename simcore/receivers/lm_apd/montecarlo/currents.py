@@ -82,6 +82,7 @@ def noisy_band_limited(
     photon=None,
     stream0: int = 0,
     key: int | None = None,
+    white_level: np.ndarray | None = None,
 ) -> np.ndarray:
     """Add the white current noise to the padded signal ``x`` IN PLACE, band-limit it.
 
@@ -101,7 +102,9 @@ def noisy_band_limited(
     step; docs/physics.md#mc-noise-draw), row i from its own stream ``stream0 + i`` under
     ``key`` (a 64-bit number; None: drawn from ``rng``), filtered by the polyphase taps; the
     shot noise on the fine grid. Without numba (and with ``photon``) every sample is drawn from
-    ``rng`` and filtered by FFT.
+    ``rng`` and filtered by FFT. ``white_level`` (n,), for the kernel: a row without signal whose
+    band-limited noise stays below its level keeps x without the white noise (a caller that
+    reads x only near higher samples saves writing it); None: x gets it in every row.
 
     The white sample variance ``S(t) / (2 dt)`` is drawn as a signal-free part for every sample
     plus an independent shot part where i_s > 0: the same normal law. The convolution is linear,
@@ -129,7 +132,7 @@ def noisy_band_limited(
         if key is None:
             key = int(rng.integers(1 << 63))
         shot_per_a = _shot_density_per_a(receiver) / (2.0 * dt)
-        y = kernel.noise_rows(x, key, stream0, scale, shot_per_a, band.taps, r)
+        y = kernel.noise_rows(x, key, stream0, scale, shot_per_a, band.taps, r, white_level)
         white = None  # x holds signal + white noise already
     elif noise and photon is not None:  # photon statistics (montecarlo.photon.PhotonNoise)
         assert rng is not None and receiver is not None  # noise needs both

@@ -22,7 +22,14 @@ from ....pulse import PulseShape
 from ..apd import ReceiverModel
 from ..detection import Outliers
 from .currents import BandLimit, band_limit, noisy_band_limited
-from .discriminator import batches, discriminate, pulse_fwhm_s, raw_end_s, reference_stop_s
+from .discriminator import (
+    ARMING_MARGIN,
+    batches,
+    discriminate,
+    pulse_fwhm_s,
+    raw_end_s,
+    reference_stop_s,
+)
 
 _DEFAULT_MAX_BYTES = 64 << 20  # working set per worker thread [bytes]
 _BYTES_PER_SAMPLE = 36  # float32 input, output, FFT buffers and masks per sample of a chunk
@@ -180,6 +187,15 @@ def _gate_chunk(setup: _GateSetup, p0: int, p1: int, rng: np.random.Generator):
     local = np.flatnonzero(lit >= 0)
     _signal_into(x, setup, lit[local], local)
     scale = None if setup.noise_scale is None else setup.noise_scale[p0:p1]
+    # the continuous comparator reads x only in rows with a sample near V_T (ARMING_MARGIN
+    # below it, in the row's units before the per-pixel scaling; 1 % lower for the rounding):
+    # unlit rows whose noise stays lower need no white noise written into x
+    level = np.full(n, np.inf)
+    if setup.continuous:
+        level[:] = 0.99 * (1.0 - ARMING_MARGIN) * setup.threshold_a
+        if scale is not None and setup.per_pixel_threshold:
+            level *= scale
+    level[local] = -np.inf
     y = noisy_band_limited(
         rng,
         x,
@@ -191,6 +207,7 @@ def _gate_chunk(setup: _GateSetup, p0: int, p1: int, rng: np.random.Generator):
         photon=setup.photon,
         stream0=p0,
         key=setup.key,
+        white_level=level,
     )
     _filtered_signal_into(y, setup, lit[local], local)
     if scale is not None and setup.per_pixel_threshold:

@@ -39,7 +39,7 @@ __all__ = [
 ]
 
 NONSTATIONARITY = 1e-8  # the white step keeps y's covariance within this (relative)
-_BLOCK = 256  # filter outputs accumulated at a time (stay in the L1 cache)
+_BLOCK = 1024  # filter outputs accumulated at a time (stay in the L1 cache)
 
 # 128-layer ziggurat for exp(-x^2 / 2) (Marsaglia and Tsang, J. Stat. Softw. 5(8), 2000):
 # the base strip's right edge R and the common area V of the layers
@@ -206,9 +206,12 @@ def _polyphase(z, ptaps, n_taps, e0, r, yrow, acc):
 
 
 @jit()
-def _noise_rows(x, y, key, stream0, scale, shot_per_a, ptaps, n_taps, e0, r, taps, z, acc, zx, zf):
+def _noise_rows(
+    x, y, key, stream0, scale, shot_per_a, ptaps, n_taps, e0, r, taps, z, acc, zx, zf, level
+):
     """Every row: white impulses on samples r i, the filter into y, the shot noise where x > 0
-    (scattered through ``taps``), all of it added to x."""
+    (scattered through ``taps``), all of it added to x; the impulses only where the row has a
+    signal or its noise reaches level[row] somewhere."""
     n, width = x.shape
     length = y.shape[1]
     two_m = width - length
@@ -219,10 +222,10 @@ def _noise_rows(x, y, key, stream0, scale, shot_per_a, ptaps, n_taps, e0, r, tap
         s0, s1, s2, s3 = _fill(z[:nz], scale[row], s0, s1, s2, s3, zx, zf)
         _polyphase(z[:nz], ptaps, n_taps, e0, r, y[row], acc)
         xr = x[row]
+        n_lit = 0
+        for c in range(width):
+            n_lit += xr[c] > 0
         if shot_per_a > 0:
-            n_lit = 0
-            for c in range(width):
-                n_lit += xr[c] > 0
             if n_lit:
                 s0, s1, s2, s3 = _fill(shot[:n_lit], 1.0, s0, s1, s2, s3, zx, zf)
                 k = 0
@@ -234,6 +237,12 @@ def _noise_rows(x, y, key, stream0, scale, shot_per_a, ptaps, n_taps, e0, r, tap
                         for j in range(max(0, c - two_m), min(length - 1, c) + 1):
                             y[row, j] += taps[c - j] * w
                         xr[c] = v + w
+        if n_lit == 0:
+            top = -np.inf
+            for j in range(length):
+                top = max(top, y[row, j])
+            if top < level[row]:
+                continue
         for k in range(nz):
             xr[r * k] += z[k]
 
@@ -246,6 +255,7 @@ def noise_rows(
     shot_per_a: float,
     taps: np.ndarray,
     r: int,
+    level: np.ndarray | None = None,
 ) -> np.ndarray:
     """Band-limited white and shot noise of each row of the padded signal ``x``, IN PLACE.
 
@@ -256,6 +266,9 @@ def noise_rows(
     shot_per_a : the shot noise variance of a fine sample per ampere of signal [A]
         (F_chain 2 q M F / (2 dt)); 0: none
     taps : (2 m + 1,) the filter h_B dt (unit sum); r : the white step (:func:`white_step`)
+    level : (n,) optional -- a row without signal whose noise stays below its level everywhere
+        keeps x without the white impulses (who asks x only near a crossing of a higher level
+        need not pay for writing them); None: every row gets them
 
     Returns y : (n, L) x.dtype -- the band-limited noise at the output samples ('valid': y[j] is
     at x's sample j + m).
@@ -268,8 +281,9 @@ def noise_rows(
     y = np.empty((n, length), dtype=dtype)
     z = np.empty((width + r - 1) // r, dtype=dtype)
     acc = np.empty(_BLOCK, dtype=dtype)
+    level = np.full(n, -np.inf) if level is None else np.asarray(level, dtype=np.float64)
     _noise_rows(
         x, y, np.uint64(key), np.uint64(stream0), np.ascontiguousarray(scale, dtype=dtype),
-        float(shot_per_a), ptaps, n_taps, e0, int(r), taps, z, acc, _ZX, _ZF,
+        float(shot_per_a), ptaps, n_taps, e0, int(r), taps, z, acc, _ZX, _ZF, level,
     )  # fmt: skip
     return y

@@ -7,6 +7,13 @@ the frame into the target frame and through Embree, :func:`simcore.geometry.cast
 frame's threads), interleaved with the frames so that a busy spell of a shared machine slows both;
 the frame / ray-cast ratio is taken round by round. Figures are medians with their range (min-max)
 over the repeats; they are printed, never asserted.
+
+The frames run on ``simcore.parallel.threads()`` threads (printed, with the rays per second per
+core of each ray cast). The scaling table then takes the 256 x 256 x 4 frame (and 512 x 512 x 4
+without ``--quick``) and the waveform Monte Carlo of 128 x 128 pixels over a 1 km gate (the
+detection stage of ``fidelity.noise_model = "montecarlo"``) at 1, 2, 4, ... threads up to the
+cores this process may use, the thread counts in turn within each round, so that a busy spell
+slows them alike; the speed-up against one thread is taken round by round.
 """
 
 from __future__ import annotations
@@ -68,6 +75,70 @@ def ray_cast_s(caster: geometry.RayCaster, rays, scene) -> float:
         t0 = time.perf_counter()
         geometry.cast_ranges(caster, directions, pose)
         return time.perf_counter() - t0
+
+
+def thread_counts(cores: int | None = None) -> list[int]:
+    """1, 2, 4, ... up to ``cores`` (the cores this process may use), and ``cores`` itself."""
+    cores = parallel.available_cores() if cores is None else max(1, int(cores))
+    counts = [1]
+    while counts[-1] * 2 <= cores:
+        counts.append(counts[-1] * 2)
+    if counts[-1] != cores:
+        counts.append(cores)
+    return counts
+
+
+def scaling(pipe: Pipeline, scene, counts, repeats: int, caster=None, stage: str | None = None):
+    """Time ``scene``'s frame (or one ``stage`` of it) at each thread count of ``counts``, the
+    counts in turn within each of ``repeats`` rounds; three poses (pitch 0, 0.5, 1 deg) or, for
+    a stage, three seeds in rotation, so that every run computes anew. With ``caster`` each frame
+    is followed by the ray cast alone of its sub-rays on the same threads.
+
+    Returns one row per count: threads, frame_s (or the stage's) and ray_cast_s (median, min,
+    max [s]), the speed-ups against the first count taken round by round, and the ray cast's
+    rays per second per core (per thread)."""
+    if stage is None:
+        variants = [with_overrides(scene, pitch_deg=p) for p in (0.0, 0.5, 1.0)]
+    else:
+        variants = [with_overrides(scene, seed=scene.seed + k) for k in range(3)]
+    rays = geometry.stage_rays(scene) if caster is not None else None
+    before = parallel.threads()
+    frames: dict[int, list[float]] = {t: [] for t in counts}
+    casts: dict[int, list[float]] = {t: [] for t in counts}
+    k = 1  # the first timed run takes the third variant: the last warm one was the second
+    try:
+        for t in counts:  # warm each thread count
+            parallel.set_threads(t)
+            for v in variants[:2]:
+                pipe.run(v)
+        for _ in range(repeats):
+            for t in counts:
+                parallel.set_threads(t)
+                k += 1
+                variant = variants[k % 3]
+                result = pipe.run(variant)
+                stages = (stage,) if stage else FRAME_STAGES
+                frames[t].append(sum(result.timings_s[s] for s in stages))
+                if caster is not None:
+                    casts[t].append(ray_cast_s(caster, rays, variant))
+    finally:
+        parallel.set_threads(before)
+    n_rays = len(rays.directions.reshape(-1, 3)) if rays is not None else 0
+    rows = []
+    for t in counts:
+        row = {
+            "threads": t,
+            "frame_s": _spread(frames[t]),
+            "speedup": _spread(a / b for a, b in zip(frames[counts[0]], frames[t], strict=True)),
+        }
+        if casts[t]:
+            row["ray_cast_s"] = _spread(casts[t])
+            row["ray_cast_speedup"] = _spread(
+                a / b for a, b in zip(casts[counts[0]], casts[t], strict=True)
+            )
+            row["rays_per_s_per_core"] = n_rays / statistics.median(casts[t]) / t
+        rows.append(row)
+    return rows
 
 
 def _median_run(pipe: Pipeline, scenes, repeats: int, caster=None, rays=None):
@@ -145,9 +216,13 @@ def run(quick: bool = False) -> dict:
         pair = [with_overrides(base, pitch_deg=0.0), with_overrides(base, pitch_deg=0.5)]
         rays = geometry.stage_rays(base)
         total, stages, floor = _median_run(pipe, pair, repeats, caster, rays)
-        rows.append(
-            {"pixels": pixels, "subrays": subrays, "frame_s": total, "stages_s": stages, **floor}
-        )
+        row = {"pixels": pixels, "subrays": subrays, "frame_s": total, "stages_s": stages}
+        if "ray_cast_s" in floor:
+            n_rays = pixels * pixels * subrays
+            floor["rays_per_s_per_core"] = (
+                n_rays / floor["ray_cast_s"]["median"] / parallel.threads()
+            )
+        rows.append({**row, **floor})
 
     base = with_overrides(scene, {"pixels": 256, "fidelity.subrays": 4})
     rerun = {}
@@ -159,7 +234,31 @@ def run(quick: bool = False) -> dict:
         total, _, _ = _median_run(pipe, pair, repeats * 2)
         rerun[name] = total
     base_mb, peak_mb = peak_memory_mb(256, 16)
+    counts = thread_counts()
+    scaled = []
+    for pixels in (256,) if quick else (256, 512):
+        frame = with_overrides(scene, {"pixels": pixels, "fidelity.subrays": 4})
+        scaled.append(
+            {
+                "what": f"{pixels} x {pixels} x 4 frame",
+                "rows": scaling(pipe, frame, counts, repeats, caster),
+            }
+        )
+    mc = with_overrides(
+        scene,
+        {"pixels": 128, "fidelity.noise_model": "montecarlo", "timing.range_gate_m": 1000.0},
+    )
+    mc_pipe = Pipeline()
+    mc_pipe.adopt(pipe)
+    scaled.append(
+        {
+            "what": "Monte Carlo 128 x 128 over 1 km (detection stage)",
+            "rows": scaling(mc_pipe, mc, counts, 3 if quick else 5, stage="detection"),
+        }
+    )
     return {
+        "threads": parallel.threads(),
+        "scaling": scaled,
         "mesh_load_s": t_load,
         "bvh_build_s": t_bvh,
         "frames": rows,
@@ -188,11 +287,14 @@ def format_table(fig: dict) -> str:
             f"{fig['repeats']} frames per configuration, median (min-max); 1-minute load average "
             f"{load['before']:.2f} before, {load['after']:.2f} after"
         )
+    if "threads" in fig:
+        cpus = fig.get("machine", {}).get("cpus", "?")
+        lines.append(f"Frames on {fig['threads']} threads ({cpus} CPUs this process may use)")
     lines += [
         "",
         "| pixels | sub-rays | frame (ms) | ray cast alone (ms) | frame / ray cast | hits | echo "
-        "| background | receiver | detection | cloud |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| background | receiver | detection | cloud | Mrays/s per core |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in fig["frames"]:
         s = r["stages_s"]
@@ -205,7 +307,11 @@ def format_table(fig: dict) -> str:
             ratio = f"{q['median']:.2f} ({q['min']:.2f}-{q['max']:.2f})"
         else:
             cast = ratio = "-"
-        lines.append(f"| {size} | {r['subrays']} | {frame} | {cast} | {ratio} | {cells} |")
+        rate = r.get("rays_per_s_per_core")
+        per_core = f"{rate / 1e6:.2f}" if rate else "-"
+        lines.append(
+            f"| {size} | {r['subrays']} | {frame} | {cast} | {ratio} | {cells} | {per_core} |"
+        )
     rr = fig["rerun_256_s"]
     mem = fig["memory_256x256x16_mb"]
     lines += [
@@ -215,7 +321,41 @@ def format_table(fig: dict) -> str:
         f"Peak memory (RSS) of a 256 x 256 x 16-sub-ray frame: {mem['peak']:.0f} MB "
         f"({mem['after_imports']:.0f} MB of it is the interpreter, libraries and the MRO).",
     ]
+    lines += format_scaling(fig.get("scaling", []))
     return "\n".join(lines)
+
+
+def format_scaling(tables: list[dict]) -> list[str]:
+    """The scaling tables: each thread count's time and its speed-up against one thread (median
+    (min-max), round by round), with the ray cast's rays per second per core (per thread)."""
+    lines: list[str] = []
+    for table in tables:
+        has_cast = any("ray_cast_s" in r for r in table["rows"])
+        lines += ["", f"Scaling, {table['what']}:", ""]
+        if has_cast:
+            lines += [
+                "| threads | frame (ms) | speed-up | ray cast alone (ms) | speed-up "
+                "| Mrays/s per core |",
+                "|---|---|---|---|---|---|",
+            ]
+        else:
+            lines += ["| threads | time (ms) | speed-up |", "|---|---|---|"]
+        for r in table["rows"]:
+            q = r["speedup"]
+            cells = [
+                str(r["threads"]),
+                _ms(r["frame_s"]),
+                f"{q['median']:.2f} ({q['min']:.2f}-{q['max']:.2f})",
+            ]
+            if has_cast:
+                c = r["ray_cast_speedup"]
+                cells += [
+                    _ms(r["ray_cast_s"]),
+                    f"{c['median']:.2f} ({c['min']:.2f}-{c['max']:.2f})",
+                    f"{r['rays_per_s_per_core'] / 1e6:.2f}",
+                ]
+            lines.append("| " + " | ".join(cells) + " |")
+    return lines
 
 
 def main(quick: bool = False, json_path: str | None = None) -> int:

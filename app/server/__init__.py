@@ -4,7 +4,9 @@ the connection guards, and the patches of trame-server and wslink with the relea
 checked against.
 
 ``launcher`` the sessions and the proxy in front of them; ``zygote`` the sessions' preloaded
-parent; ``security`` the websocket door; ``connections`` the guarded listening sites (idle and
+parent; ``process`` the serving processes (a session's token and address-space limit, the
+launcher's run, the exit status); ``addresses`` what the server prints and trame's options;
+``security`` the websocket door; ``connections`` the guarded listening sites (idle and
 partial connections, connections per address); ``sync`` the per-page state synchronisation that
 replaces trame's; ``versions`` the framework releases the patches were checked against, and the
 check made at start (standard library only: this package's ``__init__`` imports nothing, so that

@@ -571,7 +571,8 @@ class Launcher:
             return await self.zygote.spawn(self)
         token = secrets.token_urlsafe(32)
         # two malloc arenas: each thread's own (64 MB of address space apiece) would eat the
-        # session's address-space limit (app.main.limit_address_space) without using memory
+        # session's address-space limit (app.server.process.limit_address_space) without using
+        # memory
         env = {**os.environ, "PYTHONUNBUFFERED": "1", "MALLOC_ARENA_MAX": "2"}
         proc = await asyncio.create_subprocess_exec(
             *self.command(self.scene, self.options),

@@ -116,6 +116,8 @@ def main(argv: list[str] | None = None) -> int:
 def _serve(app_main, args, scene, engine, token: str, budget: int) -> int:
     """A forked session: the app on its own server until SIGTERM (as ``python -m app --shared
     --token-stdin`` runs it); its exit status."""
+    from app.server import process  # noqa: PLC0415  (after the version check, as app_main)
+
     try:
         sys.stdin.close()  # the zygote's: the launcher's spawn lines are not for the session
         app = app_main.LmapdApp(
@@ -125,9 +127,9 @@ def _serve(app_main, args, scene, engine, token: str, budget: int) -> int:
             studies_dir=args.studies,
         )
         app.token = token
-        signal.signal(signal.SIGTERM, app_main._interrupt)
-        app_main.limit_address_space(budget + app_main.HEADROOM_BYTES)
-        return app_main.serve_until_stopped(lambda: app.start(args.host, args.port), args)
+        signal.signal(signal.SIGTERM, process.interrupt)
+        process.limit_address_space(budget + process.HEADROOM_BYTES)
+        return process.serve_until_stopped(lambda: app.start(args.host, args.port), args)
     except BaseException:  # a session that cannot start says why and exits; never returns
         import traceback  # noqa: PLC0415
 

@@ -147,7 +147,7 @@ def test_the_default_caps_fit_the_sessions_in_the_memory_share_between_one_and_e
 
 
 def test_the_start_says_whether_a_class_of_30_fits():
-    from app.main import class_line
+    from app.server.process import class_line
 
     mib = lau.MIB
     small = lau.default_caps(available_bytes=4000 * mib, session_rss_bytes=370 * mib)

@@ -55,7 +55,7 @@ def test_the_estimate_bounds_the_measured_peak_of_a_frame(pixels, preset, distan
 
 def test_a_session_over_its_address_space_limit_fails_alone():
     code = (
-        "from app.main import limit_address_space\n"
+        "from app.server.process import limit_address_space\n"
         "assert limit_address_space(256 * 2**20)\n"
         "small = bytearray(64 * 2**20)\n"
         "try:\n"

@@ -86,7 +86,7 @@ def test_main_listens_on_loopback_unless_a_host_is_given(monkeypatch):
 
 
 def test_the_start_message_names_the_address_and_warns_off_loopback():
-    from app.main import start_message
+    from app.server.addresses import start_message
 
     assert start_message("127.0.0.1", 8080, "T0k-en_") == [
         "lmapd-sim app: http://127.0.0.1:8080/?token=T0k-en_  (Ctrl+C stops it)"
@@ -529,7 +529,7 @@ def test_the_lan_addresses_leave_out_loopback_and_link_local(monkeypatch):
 
     import psutil
 
-    from app.main import lan_addresses
+    from app.server.addresses import lan_addresses
 
     def addr(family, address):
         return SimpleNamespace(family=family, address=address)

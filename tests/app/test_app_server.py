@@ -226,7 +226,7 @@ def test_a_page_that_never_reports_does_not_block_frames_for_long(app):
 
 @pytest.mark.parametrize("token", ["-starts-with-a-dash", "--also", "plain_token-0"])
 def test_the_server_reads_any_token_as_its_key(app, token):
-    from app.main import trame_arguments
+    from app.server.addresses import trame_arguments
 
     args, _ = app.server.cli.parse_known_args(trame_arguments("127.0.0.1", 8123, token))
     assert (args.authKey, args.host, args.port, args.timeout) == (token, "127.0.0.1", 8123, 0)

@@ -36,7 +36,7 @@ def predicted_range_m(
     scene: Scene, echo: EchoStage, rx: GmResponse, pre: int, length: int, min_counts=1.0
 ):
     """(n,) each lit pixel's range as its histogram gives it on average (pile-up, the
-    frame's finite pulses, jitter and bins included: :mod:`gm_pileup`), its sd [m] and its
+    frame's finite pulses, jitter and bins included: :mod:`.pileup`), its sd [m] and its
     skewness [1], for the frame's estimator (the centroid, or the first-photon fit of
     ``gm.pileup_correction``); ``min_counts``: the lit pixels' thresholds in counts."""
     gm = scene.gm

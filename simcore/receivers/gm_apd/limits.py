@@ -1,7 +1,7 @@
 """What a Geiger-mode frame may cost, and the pixel's chance to be armed (issue 25).
 
 Memory: a frame's avalanche records and the temporaries that time, sort and histogram them
-(:func:`gm_events.simulate_frame`, :func:`gm_histogram.histogram`) peak at about
+(:func:`.events.simulate_frame`, :func:`.histogram.histogram`) peak at about
 ``BYTES_PER_EVENT`` bytes per recorded avalanche (measured: ``lmapd simulate`` at 64 x 64 px,
 first-photon detection over a 1000 km gate, 1,000 and 4,000 pulses: 0.85 and 2.07 GB peak
 resident, 101 bytes per avalanche between them). A frame whose expected avalanches would pass

@@ -96,7 +96,7 @@ def _tail_count(mu, q: float) -> np.ndarray:
 def _expected_window_counts(scene: Scene, echo: EchoStage, signal_pe, rate_lit_hz):
     """(n,) expected signal and background counts of the frame in each lit pixel's peak
     window: N a (1 - exp(-f N_s)) and N a r w, with a the pixel's chance to be armed when the
-    echo comes (:func:`gm_limits.armed_probability`: the background's renewal process since
+    echo comes (:func:`.limits.armed_probability`: the background's renewal process since
     the gate opened, e^{-r t} within the first dead time)."""
     gm = scene.gm
     armed = echo_armed_probability(scene, echo, rate_lit_hz)

@@ -90,3 +90,39 @@ def test_the_ideal_receiver_runs_through_the_app_stats(ideal, plate_scene):
     assert stats["Median range σ"] == "0 cm"
     assert sum(frame.snr_histogram["data"][0]["y"]) == len(snr)
     assert frame.waveforms["data"]  # the default pixel's echo is drawn
+
+
+@pytest.mark.parametrize("kind", receivers.BUILT_IN)
+def test_a_built_in_receiver_gives_what_its_declaration_says(kind, plate_scene):
+    """The declaration is no wish list: its summary figures are in the summary (and the
+    receiver gives no other), its point attributes are the cloud's extra columns, its stats
+    rows format from a real summary, and its controls set keys of its sections within range."""
+    declared = receivers.get(kind)
+    scene = plate_scene(**SMALL, **{"receiver.kind": kind})
+    result = simcore.Pipeline().run(scene)
+    summary = result.summary(quality=False)
+    figures = {f.name for f in declared.summary_figures}
+    given = set(result.detection.summary_figures) - {"warnings"}
+    assert given <= figures and figures <= set(summary), (given, figures)
+    attributes = {a.name for a in declared.point_attributes}
+    assert set(result.detection.point_attributes) == attributes
+    assert attributes <= set(result.attributes)
+    noise = result.receiver.noise_figures  # (the app's stats add them to the summary)
+    fields = {"scene": summary["scene"], "noise": noise, "summary": summary}
+    assert declared.description.format(**fields)
+    for row in declared.stats_rows:
+        assert row.text.format(**fields)
+    for control in declared.controls:
+        section, name = control.key.split(".", 1)
+        default = getattr(getattr(scene, section), name) / control.scale
+        assert control.lo <= default <= control.hi, control.name
+        simcore.with_overrides(scene, {control.key: control.hi * control.scale})  # valid
+
+
+def test_the_design_studies_total_energy_counts_a_frames_pulses():
+    from simcore.design.study import cost_figure
+
+    gm = simcore.with_overrides(simcore.Scene(), {"receiver.kind": "gm_apd", "gm.pulses": 37})
+    assert cost_figure("laser.pulse_energy_total_j", gm) == 37 * gm.laser.pulse_energy_j
+    lm = simcore.Scene()
+    assert cost_figure("laser.pulse_energy_total_j", lm) == lm.laser.pulse_energy_j

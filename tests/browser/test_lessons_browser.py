@@ -1,7 +1,8 @@
 """Lessons in a real headless Chromium, on a server of their own (a lesson sets the scene every
 page shares): a lesson's button opens its scene, its card above the views and its selected pixels
-(markers on the array image, their echoes in the chart); leaving keeps the scene; every control
-the lessons add has an accessible name."""
+(markers on the array image, their echoes in the chart); leaving keeps the scene; the fly-around
+lesson draws the orbits' map and the day/night one the Sun and the Earth; every control the
+lessons add has an accessible name."""
 
 from __future__ import annotations
 
@@ -74,6 +75,10 @@ def test_leaving_a_fly_around_lesson_keeps_its_frame(page, lessons_url):
     open_from_the_panel(page, "flyaround-edge-on")
     assert (state(page, "mode"), state(page, "fly_t_s")) == ("flyaround", 1500)
     assert page.locator(".slider-fly_t_s").is_visible()
+    # the orbits' map: the Earth, both orbits, the target, the lidar's path around it and the dots
+    traces = page.locator(".fly-map-box .js-plotly-plot .scatterlayer .trace")
+    traces.nth(6).wait_for(state="attached", timeout=20_000)
+    assert traces.count() == 7
     keys = ("pixels", "pulse_energy_mj", "tnr", "seed", "mode", "fly_t_s", "selected_pixels")
     before = {key: state(page, key) for key in keys}
     points = page.locator(".point-count").inner_text()
@@ -85,6 +90,20 @@ def test_leaving_a_fly_around_lesson_keeps_its_frame(page, lessons_url):
     assert page.locator(".point-count").inner_text() == points  # the same frame
     page.locator(".mode-single").click()  # back to the single frame for the next test
     wait_settled(page)
+
+
+def test_the_day_night_lesson_draws_the_sun_and_the_earth_in_the_scene(page, lessons_url):
+    page.goto(lessons_url)
+    wait_first_frame(page)
+    wait_settled(page)
+    open_from_the_panel(page, "day-night")  # the Sun behind the lidar: at the zenith
+    sun = page.locator(".scene-card .sun-row")
+    assert sun.inner_text().startswith("Sun: azimuth 0°, elevation 90° (target frame)")
+    assert (
+        "km below (the target's nadir, +z)" in page.locator(".scene-card .earth-row").inner_text()
+    )
+    assert state(page, "sun_arrow") and state(page, "earth_arrow")
+    page.get_by_role("button", name="Leave lesson").click()
 
 
 def test_every_lesson_control_has_an_accessible_name(page, lessons_url):

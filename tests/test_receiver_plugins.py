@@ -31,8 +31,6 @@ ALLOWED = {
     # the paper's reproduction and its figures are the LM-APD's (Eqs. 7-31) by definition
     "simcore/reproduce.py": "the paper's reproduction: the LM-APD's timing figures",
     "simcore/cli/reproduce/items_echo.py": "the paper's reproduction: the LM-APD's chain",
-    # the app's photon-count chart (``chart = "counts"``) draws the Geiger-mode histogram model
-    "app/payloads/photons.py": "the counts chart draws the Geiger-mode histogram model",
     # the key reference's doc line of receiver.kind names the built-in kinds (documentation)
     "simcore/scene/sections.py": "the doc of the key receiver.kind",
     # lesson data: scenes a lesson sets up (documented data)

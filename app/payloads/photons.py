@@ -1,4 +1,5 @@
-"""The Geiger-mode array's chart: the selected pixels' photon-count histograms of the frame's
+"""The photon-count chart (``chart = "counts"`` in a receiver's declaration: the Geiger-mode
+array's): the selected pixels' photon-count histograms of the frame's
 pulses, with the counts expected from the same pulses drawn over them (dead time, jitter and
 bins included: what the histogram should show on average) and the counts that would come
 without dead time (on their own axis when they dwarf the histogram: their difference from the
@@ -13,10 +14,8 @@ import numpy as np
 import simcore
 from app.payloads.charts import base_layout, detection_text, note, range_axis, time_axis
 from app.payloads.style import SELECTION_COLORS
+from simcore import receivers
 from simcore.constants import C as C_M_S
-from simcore.receivers.gm_apd import expected as gm_expected
-from simcore.receivers.gm_apd.frame import frame_pulse_energy_j, photon_energy_j
-from simcore.receivers.gm_apd.limits import armed_probability
 
 MARGIN_BINS = 12  # bins shown either side of the echo's waveform
 NO_ECHO_BINS = 80  # bins shown around the busiest bin of a pixel without an echo
@@ -27,8 +26,8 @@ def photon_figure(result: simcore.Result, selection: list) -> dict:
     """The plotly figure of the selected pixels' histograms (counts per TDC bin over
     ``gm.pulses`` pulses, against time since emission), their expected counts with the dead
     time, and without it (right-hand axis when it would flatten the histogram)."""
-    scene, rx = result.scene, result.receiver
-    gm, n = scene.gm, result.pixels
+    view = receivers.resolve(receivers.get(result.scene.receiver.kind).counts)(result)
+    n = result.pixels
     bars: list[dict] = []
     with_dead: list[dict] = []
     without: list[dict] = []
@@ -37,19 +36,19 @@ def photon_figure(result: simcore.Result, selection: list) -> dict:
     for i, (row, col) in enumerate(selection):
         color = SELECTION_COLORS[i % len(SELECTION_COLORS)]
         flat = int(row) * n + int(col)
-        bins, counts = rx.histogram.pixel_counts(flat)
+        bins, counts = view.pixel_counts(flat)
         w = result.waveform(int(row), int(col))
-        k0, k1 = _window_bins(w, bins, counts, rx.gate_start_s, gm.bin_s, rx.histogram.n_bins)
+        k0, k1 = _window_bins(w, bins, counts, view.gate_start_s, view.bin_s, view.n_bins)
         shown = (bins >= k0) & (bins < k1)
         elsewhere = int(counts[~shown].sum())
-        x_bars = _centre_ns(rx.gate_start_s, gm.bin_s, bins[shown])
+        x_bars = _centre_ns(view.gate_start_s, view.bin_s, bins[shown])
         bars.append(
             {
                 "type": "bar",
                 "x": x_bars.tolist(),
                 "y": counts[shown].tolist(),
                 "customdata": _range_m(x_bars).tolist(),
-                "width": gm.bin_s * 1e9,
+                "width": view.bin_s * 1e9,
                 "name": f"({row}, {col}) measured counts"
                 + (f", {elsewhere:,} more elsewhere in the gate" if elsewhere else "")
                 + ("" if w.detected else f"; {detection_text(w)}"),
@@ -59,14 +58,14 @@ def photon_figure(result: simcore.Result, selection: list) -> dict:
             }
         )
         k = np.arange(k0, k1)
-        x = _centre_ns(rx.gate_start_s, gm.bin_s, k)
-        span += [float(x[0]) - gm.bin_s * 1e9, float(x[-1]) + gm.bin_s * 1e9]
+        x = _centre_ns(view.gate_start_s, view.bin_s, k)
+        span += [float(x[0]) - view.bin_s * 1e9, float(x[-1]) + view.bin_s * 1e9]
         common = {"type": "scatter", "mode": "lines", "x": x.tolist()}
         common["customdata"] = _range_m(x).tolist()
         with_dead.append(
             {
                 **common,
-                "y": np.round(expected_counts(result, w, flat, k0, k1), 4).tolist(),
+                "y": np.round(view.expected(w, flat, k0, k1), 4).tolist(),
                 "name": f"({row}, {col}) expected (same pulses, dead time and jitter)",
                 "line": {"color": color, "width": 2, "shape": "hvh"},
                 "hovertemplate": "%{x:,.2f} ns (%{customdata:,.2f} m): %{y:.3g} expected"
@@ -76,7 +75,7 @@ def photon_figure(result: simcore.Result, selection: list) -> dict:
         without.append(
             {
                 **common,
-                "y": np.round(_arriving_counts(result, w, flat, k), 4).tolist(),
+                "y": np.round(view.arriving(w, flat, k), 4).tolist(),
                 "name": f"({row}, {col}) without dead time",
                 "line": {"color": color, "width": 1.2, "dash": "dot", "shape": "hvh"},
                 "hovertemplate": "%{x:,.2f} ns (%{customdata:,.2f} m): %{y:.3g} expected"
@@ -90,7 +89,7 @@ def photon_figure(result: simcore.Result, selection: list) -> dict:
     own_axis = right_peak > OWN_AXIS_RATIO * left_peak
     layout = base_layout(
         "time since emission (ns)",
-        f"avalanches per {gm.bin_s * 1e12:.0f} ps bin ({gm.pulses:,} pulses)",
+        f"avalanches per {view.bin_s * 1e12:.0f} ps bin ({view.pulses:,} pulses)",
         legend={"orientation": "h", "x": 0, "y": 1.01, "yanchor": "bottom", "font": {"size": 10}},
         annotations=annotations,
         barmode="overlay",
@@ -141,54 +140,3 @@ def _window_bins(w, bins, counts, gate_start_s: float, bin_s: float, n_bins: int
     else:
         lo, hi = 0, NO_ECHO_BINS
     return max(lo, 0), min(max(hi, lo + 1), n_bins)
-
-
-def _element_pe(result: simcore.Result, flat: int) -> tuple[np.ndarray, np.ndarray]:
-    """(1, K) arrival from the gate's opening [s] and mean photoelectrons per pulse of each
-    echo element of pixel ``flat`` (one empty element for a pixel without an echo)."""
-    scene, echo, rx = result.scene, result.echo, result.receiver
-    at = np.flatnonzero(np.asarray(echo.pixel) == flat)
-    if not len(at):
-        return np.zeros((1, 1)), np.zeros((1, 1))
-    per_weight = (
-        scene.gm.pde * frame_pulse_energy_j(scene) / photon_energy_j(scene.laser.wavelength_m)
-    )
-    arrivals = np.asarray(echo.arrivals_s)[at] - rx.gate_start_s
-    return arrivals, per_weight * np.asarray(echo.weights)[at]
-
-
-def expected_counts(result: simcore.Result, w, flat: int, k0: int, k1: int) -> np.ndarray:
-    """(k1 - k0,) the avalanches bins k0 .. k1 - 1 of pixel ``flat`` hold on average over the
-    frame's pulses: its echo and constant rate through the dead time, the jitter and the bins
-    (``gm_expected.expected_histogram``; the pixel armed at the window's start as the background's
-    renewal process leaves it)."""
-    scene, rx = result.scene, result.receiver
-    gm = scene.gm
-    element_t, element_pe = _element_pe(result, flat)
-    rate = np.asarray(rx.rate_hz[flat : flat + 1], dtype=np.float64)
-    armed = armed_probability(rate, k0 * gm.bin_s, gm.dead_time_s)
-    scale_s = result.echo.shape.tau_s / result.echo.shape.a
-    timing = gm_expected.Timing(
-        scale_s=scale_s,
-        jitter_s=gm.jitter_s,
-        bin_s=gm.bin_s,
-        dead_time_s=gm.dead_time_s,
-        n_pulses=gm.pulses,
-    )
-    q, _ = gm_expected.expected_histogram(
-        timing, element_t, element_pe, rate, np.array([k0]), k1 - k0, armed
-    )
-    return gm.pulses * q[0]
-
-
-def _arriving_counts(result: simcore.Result, w, flat: int, k: np.ndarray) -> np.ndarray:
-    """Mean avalanches per bin over the frame without dead time or jitter: pulses x bin x
-    (PDE x the echo's photon rate P_r(t) / (h nu) + the pixel's background and dark rate)."""
-    scene, rx = result.scene, result.receiver
-    gm = scene.gm
-    t = rx.gate_start_s + (k + 0.5) * gm.bin_s
-    echo_w = np.interp(t, w.t_s, w.power_w, left=0.0, right=0.0) if len(w.t_s) else 0.0 * t
-    # the waveform is the laser pulse's; the frame's pulses carry it less the attenuation
-    echo_w = echo_w * frame_pulse_energy_j(scene) / scene.laser.pulse_energy_j
-    rate_hz = gm.pde * echo_w / photon_energy_j(scene.laser.wavelength_m) + rx.rate_hz[flat]
-    return gm.pulses * gm.bin_s * rate_hz

@@ -148,6 +148,8 @@ class Receiver:
         threshold and the detected range) or ``counts`` (photon-count histograms over a
         frame's pulses); chart_title, chart_series (the caption: what each series shows) and
         snr_caption: their words
+    counts : (result) -> the frame's counts as the ``counts`` chart draws them (its gate, bins,
+        pulses, and per pixel the measured, expected and arriving counts), for that chart
     frame_load : (scene, echo, background) -> :class:`FrameLoad`, what a frame will cost before
         its receiver stage runs (the app refuses frames over its budget), or None (no check)
     frame_pulses_key : the key of its pulses per frame (a frame sums that many pulses; the
@@ -183,6 +185,7 @@ class Receiver:
     chart_title: str = ""
     chart_series: tuple[Series, ...] = ()
     snr_caption: str = ""
+    counts: Step | None = None
     frame_load: Step | None = None
     frame_pulses_key: str | None = None
     pulses_needed: Step | None = None

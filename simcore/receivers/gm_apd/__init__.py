@@ -7,7 +7,8 @@
 - :mod:`.response`: the receiver stage; :mod:`.records`: its response and detection records;
 - :mod:`.windows`: the peak window, its expected counts, thresholds and predicted P_d;
 - :mod:`.detection`: the detection stage; :mod:`.false_points`: the expected false points;
-- :mod:`.figures`: the predicted and measured ``gm.*`` figures;
+- :mod:`.figures`: the predicted and measured ``gm.*`` figures; :mod:`.counts`: a pixel's
+  measured, expected and arriving counts as the app's counts chart draws them;
 - :mod:`.pileup` (with :mod:`.expected`, :mod:`.coates`, :mod:`.first_photon`): the range the
   histogram gives at any flux, and the first-photon correction;
 - :mod:`.section`: its scene section ``[gm]`` and the rules between its keys.
@@ -137,6 +138,7 @@ RECEIVER = Receiver(
     snr_stats_label="Median count SNR S/√(S+B) (frame)",
     threshold_on_snr_axis=False,
     chart="counts",
+    counts=f"{_HERE}.counts:frame_counts",
     chart_title="Photon counts of the selected pixels",
     chart_series=(
         Series(style="bars", doc="avalanches counted per time bin over the frame's pulses"),

@@ -50,7 +50,7 @@ def slider(key: str) -> None:
         digits = 3
         model = (f"Math.log10(Math.max({key}, 1e-12))",)
         update = f"{key} = Number((10 ** $event).toPrecision({digits}))"
-        # (the keys step a hundredth of a decade, Page a tenth: app.ui.classroom)
+        # (the keys step a hundredth of a decade, Page a tenth: app/static/keyboard.js)
         bounds = {"min": math.log10(spec.lo), "max": math.log10(spec.hi), "step": 0.001}
     else:
         model = (key,)

@@ -7,7 +7,7 @@ from trame.ui.vuetify3 import VAppLayout
 from trame.widgets import client, html
 from trame.widgets import vuetify3 as v3
 
-from app.ui import classroom, controls, design, glossary, lessons, panels, static, views3d
+from app.ui import controls, design, glossary, lessons, panels, static, views3d
 from app.ui.widgets import html_attributes
 
 # After the page applied a frame, the frame-pacing helper (app/static/frame.js) waits until it is
@@ -134,8 +134,6 @@ def build_layout(server) -> VAppLayout:
     server.state.wave_cursor = ""  # the waveform chart's cursor readout (app.ui.panels)
     server.state.client_only("wave_cursor")
     with VAppLayout(server, full_height=True) as layout:
-        client.Script(classroom.KEYBOARD_SCRIPT)
-        client.Style(classroom.CURSOR_CSS)
         client.Style(glossary.CSS)
         glossary.glossary_dialog()
         lessons.physics_dialog()

@@ -69,7 +69,7 @@ DRAG = (
 )
 DRAG_END = "$event.currentTarget.dataset.drag = ''"
 LEAVE = "$event.currentTarget.dataset.drag = ''; $event.currentTarget.dataset.active = ''"
-# Keys on the focused image (app.ui.classroom.KEYBOARD_SCRIPT): arrows move a cursor pixel (the
+# Keys on the focused image (app/static/keyboard.js): arrows move a cursor pixel (the
 # zoomed view follows it), Enter selects it, Shift+Enter adds it; Ctrl + arrows pan, + and - zoom
 # about the centre, 0 resets.
 KEYS = (

@@ -23,8 +23,9 @@ SCRIPTS = (
     "link.js",  # shared links: trame.utils.lmapdLink (app.ui.controls), the address bar
     "view-scroll.js",  # the 3D views leave the page's scroll alone
     "cursor.js",  # the waveform chart's measuring cursor: trame.utils.lmapdCursor (app.ui.panels)
+    "keyboard.js",  # log sliders' keys, the array image's cursor pixel, Copy link's answer
 )
-STYLES = ("page.css",)
+STYLES = ("page.css", "markers.css")
 
 
 def served_name(folder: Path = STATIC_DIR) -> str:

@@ -23,7 +23,7 @@ def a11y_attributes(
     """The data attributes from which the page's accessibility script names a control's slider
     and number field and speaks the slider's value with its unit (app/static/a11y.js);
     a log slider's state key lets its Page keys step a tenth of a decade
-    (app.ui.classroom.KEYBOARD_SCRIPT)."""
+    (app/static/keyboard.js)."""
     attrs = {"data_a11y_name": name, "data_a11y_unit": SPOKEN_UNITS.get(unit, unit)}
     if log_scale:
         attrs["data_a11y_log"] = "1"

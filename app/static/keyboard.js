@@ -1,18 +1,15 @@
-"""The page's keyboard helpers: the log sliders' Page keys (a tenth of a decade), and the array
-image's cursor pixel (arrow keys move it, Enter selects it, Shift+Enter adds it)."""
-
-from __future__ import annotations
-
-# Log sliders (a control box with data-a11y-log="1" and data-state-key): an arrow key moves the
-# value by a hundredth of a decade (x 1.023: 500 -> 512 m), a Page key by a tenth (x 1.26), from
-# the value itself (the thumb's position is rounded to its fine step), rounded to 3 digits like a
-# drag's and kept within the slider's range; Vuetify's own steps (a thousandth of a decade per
-# arrow: 500 -> 501 m) never run.
-# The array image: lmapdArray.key(event, zoom, cursor, pixels, selected) returns the new
-# [zoom, cursor]: arrows move the cursor one pixel (8 with Shift), the zoomed view following it;
-# Ctrl + arrows pan; Enter (or Space) selects the cursor's pixel, Shift+Enter adds it (or takes
-# it off); + and - zoom about the centre, 0 resets. The cursor's pixel goes to the readout.
-KEYBOARD_SCRIPT = """
+// The page's keyboard helpers (app.ui.panels, app.ui.widgets): the log sliders' Page keys (a
+// tenth of a decade), the array image's cursor pixel (arrow keys move it, Enter selects it,
+// Shift+Enter adds it), and "Copy link"'s answer (trame.utils.lmapdCopy, app.ui.controls).
+// Log sliders (a control box with data-a11y-log="1" and data-state-key): an arrow key moves the
+// value by a hundredth of a decade (x 1.023: 500 -> 512 m), a Page key by a tenth (x 1.26), from
+// the value itself (the thumb's position is rounded to its fine step), rounded to 3 digits like a
+// drag's and kept within the slider's range; Vuetify's own steps (a thousandth of a decade per
+// arrow: 500 -> 501 m) never run.
+// The array image: lmapdArray.key(event, zoom, cursor, pixels, selected) returns the new
+// [zoom, cursor]: arrows move the cursor one pixel (8 with Shift), the zoomed view following it;
+// Ctrl + arrows pan; Enter (or Space) selects the cursor's pixel, Shift+Enter adds it (or takes
+// it off); + and - zoom about the centre, 0 resets. The cursor's pixel goes to the readout.
 (() => {
   const clamp = (v, lo, hi) => Math.min(hi, Math.max(lo, v));
   const logSteps = { ArrowRight: 0.01, ArrowUp: 0.01, ArrowLeft: -0.01, ArrowDown: -0.01,
@@ -80,12 +77,3 @@ KEYBOARD_SCRIPT = """
     },
   };
 })();
-"""
-
-CURSOR_CSS = """
-.peak-marker { position: absolute; width: 9px; height: 9px; border: 2px solid #ff40c8;
-  border-radius: 50%; transform: translate(-50%, -50%); pointer-events: none;
-  box-shadow: 0 0 0 1px rgba(0,0,0,0.6); }
-.array-cursor { position: absolute; transform: translate(-50%, -50%); pointer-events: none;
-  outline: 2px dashed #ffb300; outline-offset: 1px; min-width: 10px; min-height: 10px; }
-"""

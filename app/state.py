@@ -68,7 +68,13 @@ _SHARED_SPECS: dict[str, ControlSpec] = {
 
 def receiver_controls() -> dict[str, receivers.Control]:
     """Every registered receiver's own controls (its declaration's), by state name."""
-    return {c.name: c for r in receivers.receivers() for c in r.controls}
+    declared = receivers.receivers()  # the same tuple until a receiver is (un)registered
+    if declared is not _controls_of[0]:
+        _controls_of[:] = [declared, {c.name: c for r in declared for c in r.controls}]
+    return _controls_of[1]
+
+
+_controls_of: list = [None, {}]  # (the registry's receivers, their controls by state name)
 
 
 def display_per_si(control: receivers.Control) -> float:

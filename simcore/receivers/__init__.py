@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import importlib
 from importlib import metadata
+from types import MappingProxyType
 from typing import Any
 
 from .declaration import (
@@ -74,6 +75,7 @@ ENTRY_POINTS = "lmapd_sim.receivers"  # the entry-point group of installed recei
 _REGISTERED: dict[str, Receiver] = {}  # by register()
 _LOADED: dict[str, Receiver] = {}  # built-in and installed ones, once loaded
 _installed: dict[str, str] | None = None  # kind -> "package.module:NAME" of the entry points
+_known: dict[str, Any] = {}  # the declarations and sections, until a register() or unregister()
 
 # the records and stages, by their old names here (loaded on first use)
 _LAZY = {
@@ -120,12 +122,14 @@ def register(receiver: Receiver) -> Receiver:
                     f"receiver {receiver.kind!r}: the section [{section.name}] is {other.kind!r}'s"
                 )
     _REGISTERED[receiver.kind] = receiver
+    _known.clear()
     return receiver
 
 
 def unregister(kind: str) -> None:
     """Forget a receiver :func:`register` made known (built-in and installed ones stay)."""
     _REGISTERED.pop(kind, None)
+    _known.clear()
 
 
 def kinds() -> tuple[str, ...]:
@@ -152,12 +156,18 @@ def get(kind: str) -> Receiver:
 
 def receivers() -> tuple[Receiver, ...]:
     """Every receiver's declaration, in the order of :func:`kinds`."""
-    return tuple(get(k) for k in kinds())
+    if "receivers" not in _known:
+        _known["receivers"] = tuple(get(k) for k in kinds())
+    return _known["receivers"]
 
 
-def sections() -> dict[str, type]:
-    """The receivers' own scene sections, name -> the dataclass of its keys."""
-    return {r.section.name: r.section.keys for r in receivers() if r.section is not None}
+def sections() -> MappingProxyType[str, type]:
+    """The receivers' own scene sections, name -> the dataclass of its keys (read-only: the
+    scene reads it at every use of a receiver's section)."""
+    if "sections" not in _known:
+        found = {r.section.name: r.section.keys for r in receivers() if r.section is not None}
+        _known["sections"] = MappingProxyType(found)
+    return _known["sections"]
 
 
 def section_of(name: str) -> Receiver | None:

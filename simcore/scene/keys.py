@@ -4,6 +4,7 @@ several stages derive from them) and the key reference (``lmapd keys``, the READ
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -82,7 +83,10 @@ class SceneKeys:
         cls = RECEIVER_SECTIONS().get(name)
         if cls is None:
             raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
-        return dict(self.receiver_sections).get(name) or cls()
+        for held, keys in self.receiver_sections:
+            if held == name:
+                return keys
+        return _defaults(cls)
 
     def receiver_section_items(self) -> list[tuple[str, Any]]:
         """Every receiver's section, (name, keys), in the order of the key reference."""
@@ -117,6 +121,12 @@ class SceneKeys:
         only for a receiver other than the default lm_apd: LM-APD scenes read as before the key
         existed)."""
         return to_plain(self)
+
+
+@functools.lru_cache(maxsize=64)
+def _defaults(cls: type) -> Any:
+    """A receiver section's defaults (frozen: one instance serves every scene)."""
+    return cls()
 
 
 def with_receiver_section(receiver_sections: tuple, name: str, keys: Any) -> tuple:

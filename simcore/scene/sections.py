@@ -419,8 +419,15 @@ class Sections(Mapping[str, type]):
     key reference and the dumps: the shared ones, the receivers' own (read from the registry at
     each use, so that a receiver registered later is there), the quality metrics'."""
 
+    _own: object = None  # the registry's sections when _merged was made
+    _merged: dict[str, type] = {}
+
     def _all(self) -> dict[str, type]:
-        return {**_SHARED_SECTIONS, **receivers.sections(), **_LAST_SECTIONS}
+        own = receivers.sections()  # the same object until a receiver is (un)registered
+        if own is not self._own:
+            self._merged = {**_SHARED_SECTIONS, **own, **_LAST_SECTIONS}
+            self._own = own
+        return self._merged
 
     def __getitem__(self, name: str) -> type:
         return self._all()[name]

@@ -83,6 +83,8 @@ def noisy_band_limited(
     stream0: int = 0,
     key: int | None = None,
     white_level: np.ndarray | None = None,
+    signal_rows: np.ndarray | None = None,
+    out: np.ndarray | None = None,
 ) -> np.ndarray:
     """Add the white current noise to the padded signal ``x`` IN PLACE, band-limit it.
 
@@ -105,6 +107,8 @@ def noisy_band_limited(
     ``rng`` and filtered by FFT. ``white_level`` (n,), for the kernel: a row without signal whose
     band-limited noise stays below its level keeps x without the white noise (a caller that
     reads x only near higher samples saves writing it); None: x gets it in every row.
+    ``signal_rows`` (n,) bool: the rows that may hold a signal (None: any); ``out`` (n, L): a
+    buffer for y (the kernel writes every sample of it).
 
     The white sample variance ``S(t) / (2 dt)`` is drawn as a signal-free part for every sample
     plus an independent shot part where i_s > 0: the same normal law. The convolution is linear,
@@ -132,7 +136,9 @@ def noisy_band_limited(
         if key is None:
             key = int(rng.integers(1 << 63))
         shot_per_a = _shot_density_per_a(receiver) / (2.0 * dt)
-        y = kernel.noise_rows(x, key, stream0, scale, shot_per_a, band.taps, r, white_level)
+        y = kernel.noise_rows(
+            x, key, stream0, scale, shot_per_a, band.taps, r, white_level, signal_rows, out
+        )
         white = None  # x holds signal + white noise already
     elif noise and photon is not None:  # photon statistics (montecarlo.photon.PhotonNoise)
         assert rng is not None and receiver is not None  # noise needs both

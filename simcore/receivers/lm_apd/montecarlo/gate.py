@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import sys
+import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -177,12 +178,27 @@ def _pulses_into(out, setup, lit, local_rows, table, t_begin_s, t_end_s, col_off
         out[r[inside], cols[inside]] += (scale * p[inside]).astype(out.dtype)
 
 
+_THREAD_BUFFERS = threading.local()
+
+
+def _buffers(n: int, n_samples: int, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """The chunk's padded input x (n, n_samples + 2 m), zeroed, and a buffer for y (n,
+    n_samples), both float32: kept by the calling thread from chunk to chunk (fresh arrays of
+    tens of MB a chunk cost their page faults again each time)."""
+    held = getattr(_THREAD_BUFFERS, "arrays", None)
+    if held is None or held[0].shape != (n, n_samples + 2 * m):
+        held = (np.empty((n, n_samples + 2 * m), np.float32), np.empty((n, n_samples), np.float32))
+        _THREAD_BUFFERS.arrays = held
+    held[0].fill(0.0)
+    return held
+
+
 def _gate_chunk(setup: _GateSetup, p0: int, p1: int, rng: np.random.Generator):
     """Simulate pixels p0..p1-1 over the whole gate; return their stops and the part timings."""
     t0 = time.perf_counter()
     n = p1 - p0
     m = setup.band.half_width
-    x = np.zeros((n, setup.n_samples + 2 * m), dtype=np.float32)
+    x, y_buffer = _buffers(n, setup.n_samples, m)
     lit = setup.lit_of_pixel[p0:p1]
     local = np.flatnonzero(lit >= 0)
     _signal_into(x, setup, lit[local], local)
@@ -208,6 +224,8 @@ def _gate_chunk(setup: _GateSetup, p0: int, p1: int, rng: np.random.Generator):
         stream0=p0,
         key=setup.key,
         white_level=level,
+        signal_rows=lit >= 0,
+        out=y_buffer,
     )
     _filtered_signal_into(y, setup, lit[local], local)
     if scale is not None and setup.per_pixel_threshold:

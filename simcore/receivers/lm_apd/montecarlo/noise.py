@@ -207,11 +207,12 @@ def _polyphase(z, ptaps, n_taps, e0, r, yrow, acc):
 
 @jit()
 def _noise_rows(
-    x, y, key, stream0, scale, shot_per_a, ptaps, n_taps, e0, r, taps, z, acc, zx, zf, level
-):
+    x, y, key, stream0, scale, shot_per_a, ptaps, n_taps, e0, r, taps, z, acc, zx, zf, level,
+    signal,
+):  # fmt: skip
     """Every row: white impulses on samples r i, the filter into y, the shot noise where x > 0
-    (scattered through ``taps``), all of it added to x; the impulses only where the row has a
-    signal or its noise reaches level[row] somewhere."""
+    (scattered through ``taps``; looked for in the rows with ``signal``), all of it added to x;
+    the impulses only where the row has a signal or its noise reaches level[row] somewhere."""
     n, width = x.shape
     length = y.shape[1]
     two_m = width - length
@@ -223,8 +224,9 @@ def _noise_rows(
         _polyphase(z[:nz], ptaps, n_taps, e0, r, y[row], acc)
         xr = x[row]
         n_lit = 0
-        for c in range(width):
-            n_lit += xr[c] > 0
+        if signal[row]:
+            for c in range(width):
+                n_lit += xr[c] > 0
         if shot_per_a > 0:
             if n_lit:
                 s0, s1, s2, s3 = _fill(shot[:n_lit], 1.0, s0, s1, s2, s3, zx, zf)
@@ -238,10 +240,12 @@ def _noise_rows(
                             y[row, j] += taps[c - j] * w
                         xr[c] = v + w
         if n_lit == 0:
-            top = -np.inf
+            above = 0  # (a count, not a max: the loop vectorises)
+            yr = y[row]
+            lv = level[row]
             for j in range(length):
-                top = max(top, y[row, j])
-            if top < level[row]:
+                above += yr[j] >= lv
+            if above == 0:
                 continue
         for k in range(nz):
             xr[r * k] += z[k]
@@ -256,6 +260,8 @@ def noise_rows(
     taps: np.ndarray,
     r: int,
     level: np.ndarray | None = None,
+    signal: np.ndarray | None = None,
+    out: np.ndarray | None = None,
 ) -> np.ndarray:
     """Band-limited white and shot noise of each row of the padded signal ``x``, IN PLACE.
 
@@ -269,6 +275,9 @@ def noise_rows(
     level : (n,) optional -- a row without signal whose noise stays below its level everywhere
         keeps x without the white impulses (who asks x only near a crossing of a higher level
         need not pay for writing them); None: every row gets them
+    signal : (n,) bool, optional -- the rows that may hold a signal (the others are not searched
+        for shot noise); None: every row
+    out : (n, L) x.dtype, optional -- y is written into it (a buffer kept between calls)
 
     Returns y : (n, L) x.dtype -- the band-limited noise at the output samples ('valid': y[j] is
     at x's sample j + m).
@@ -278,12 +287,13 @@ def noise_rows(
     ptaps, n_taps, e0 = phase_taps(taps, r)
     n, width = x.shape
     length = width - (len(taps) - 1)
-    y = np.empty((n, length), dtype=dtype)
+    y = np.empty((n, length), dtype=dtype) if out is None else out
     z = np.empty((width + r - 1) // r, dtype=dtype)
     acc = np.empty(_BLOCK, dtype=dtype)
     level = np.full(n, -np.inf) if level is None else np.asarray(level, dtype=np.float64)
+    signal = np.ones(n, dtype=bool) if signal is None else np.asarray(signal, dtype=bool)
     _noise_rows(
         x, y, np.uint64(key), np.uint64(stream0), np.ascontiguousarray(scale, dtype=dtype),
-        float(shot_per_a), ptaps, n_taps, e0, int(r), taps, z, acc, _ZX, _ZF, level,
+        float(shot_per_a), ptaps, n_taps, e0, int(r), taps, z, acc, _ZX, _ZF, level, signal,
     )  # fmt: skip
     return y

@@ -28,6 +28,7 @@ receivers' sections); the records and the two stages load on first use
 from __future__ import annotations
 
 import importlib
+import warnings
 from importlib import metadata
 from types import MappingProxyType
 from typing import Any
@@ -76,6 +77,7 @@ _REGISTERED: dict[str, Receiver] = {}  # by register()
 _LOADED: dict[str, Receiver] = {}  # built-in and installed ones, once loaded
 _installed: dict[str, str] | None = None  # kind -> "package.module:NAME" of the entry points
 _known: dict[str, Any] = {}  # the declarations and sections, until a register() or unregister()
+_broken: dict[str, str] = {}  # installed receivers that did not load: kind -> why
 
 # the records and stages, by their old names here (loaded on first use)
 _LAZY = {
@@ -135,7 +137,8 @@ def unregister(kind: str) -> None:
 def kinds() -> tuple[str, ...]:
     """The valid values of ``receiver.kind``: the built-in receivers, the installed ones (by
     name), then the registered ones (in the order registered)."""
-    return (*BUILT_IN, *sorted(_entry_points()), *(k for k in _REGISTERED if k not in BUILT_IN))
+    installed = sorted(k for k in _entry_points() if k not in _broken)
+    return (*BUILT_IN, *installed, *(k for k in _REGISTERED if k not in BUILT_IN))
 
 
 def get(kind: str) -> Receiver:
@@ -155,9 +158,24 @@ def get(kind: str) -> Receiver:
 
 
 def receivers() -> tuple[Receiver, ...]:
-    """Every receiver's declaration, in the order of :func:`kinds`."""
+    """Every receiver's declaration, in the order of :func:`kinds`. An installed receiver that
+    does not load is left out with a warning (a broken package stops no other receiver)."""
     if "receivers" not in _known:
-        _known["receivers"] = tuple(get(k) for k in kinds())
+        loaded = []
+        for kind in kinds():
+            try:
+                loaded.append(get(kind))
+            except Exception as exc:
+                if kind in BUILT_IN or kind in _REGISTERED:
+                    raise
+                _broken[kind] = f"{type(exc).__name__}: {exc}"
+                where = _entry_points()[kind]
+                warnings.warn(
+                    f"the installed receiver {kind!r} ({where}) does not load and is left out: "
+                    f"{_broken[kind]}",
+                    stacklevel=2,
+                )
+        _known["receivers"] = tuple(loaded)
     return _known["receivers"]
 
 

@@ -126,3 +126,15 @@ def test_the_design_studies_total_energy_counts_a_frames_pulses():
     assert cost_figure("laser.pulse_energy_total_j", gm) == 37 * gm.laser.pulse_energy_j
     lm = simcore.Scene()
     assert cost_figure("laser.pulse_energy_total_j", lm) == lm.laser.pulse_energy_j
+
+
+def test_an_installed_receiver_that_does_not_load_is_left_out_with_a_warning(monkeypatch):
+    monkeypatch.setattr(receivers, "_installed", {"broken": "no_such_package.nowhere:RECEIVER"})
+    monkeypatch.setattr(receivers, "_broken", {})
+    monkeypatch.setattr(receivers, "_known", {})
+    with pytest.warns(UserWarning, match="installed receiver 'broken'.*does not load"):
+        assert [r.kind for r in receivers.receivers()] == ["lm_apd", "gm_apd"]
+    assert receivers.kinds() == ("lm_apd", "gm_apd")
+    assert simcore.with_overrides(simcore.Scene(), {"gm.pulses": 7}).gm.pulses == 7
+    with pytest.raises(ModuleNotFoundError):  # named, it says why
+        receivers.get("broken")

@@ -155,11 +155,24 @@ def lesson_from_record(record: Mapping[str, Any], source: str = "a lesson") -> L
         for name in ("look", "why", "try_next", "key", "title", "reference", "view"):
             if not isinstance(values.get(name, ""), str):
                 raise TypeError(f"{name} is not a string")
+        figures = values.get("figures", {})
+        odd = [
+            k for k, v in figures.items() if isinstance(v, bool) or not isinstance(v, int | float)
+        ]
+        if odd:
+            raise TypeError(f"figure {', '.join(odd)} is not a number")
     except (TypeError, ValueError) as exc:
         raise LessonError(f"{source}: {exc}") from None
     if values.get("view", "waveform") not in VIEWS:
         raise LessonError(f"{source}: view {values['view']!r} is none of {', '.join(VIEWS)}")
-    return Lesson(**values)
+    lesson = Lesson(**values)
+    try:
+        lesson.card()  # every figure its card names, in the format it gives
+    except KeyError as exc:
+        raise LessonError(f"{source}: its card names the figure {exc.args[0]}, not given") from None
+    except (ValueError, IndexError) as exc:
+        raise LessonError(f"{source}: its card cannot be written: {exc}") from None
+    return lesson
 
 
 def load_lessons(folder: Path | None = None) -> tuple[Lesson, ...]:

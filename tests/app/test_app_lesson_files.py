@@ -53,6 +53,9 @@ def test_a_copy_of_the_folder_loads_the_same_lessons(tmp_path):
         (lambda t: t.replace('view = "stats"', 'view = "sky"'), "view 'sky' is none of"),
         (lambda t: t.replace("[figures]", "[figures"), "03-distance.toml"),
         (lambda t: t.replace("\ntitle = ", "\n# title = "), "missing key title"),
+        (lambda t: t.replace("\nd = 3000.0", '\nd = "far"'), "figure d is not a number"),
+        (lambda t: t.replace("\nhit_scaled = 404", ""), "names the figure hit_scaled, not given"),
+        (lambda t: t.replace("{snr_ref:.0f}", "{snr_ref:.0q}"), "its card cannot be written"),
     ],
 )
 def test_a_broken_lesson_file_is_refused_with_its_name(tmp_path, edit, said):

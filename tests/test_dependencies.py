@@ -19,7 +19,12 @@ import pytest
 
 import app.server.versions
 import simcore.cli
-from app.server.versions import CHECKED_RANGES, FrameworkVersionError, check_framework_versions
+from app.server.versions import (
+    CHECKED_RANGES,
+    FrameworkVersionError,
+    check_framework_versions,
+    in_range,
+)
 
 ROOT = Path(__file__).resolve().parent.parent
 PROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
@@ -127,6 +132,20 @@ def test_patched_frameworks_are_declared_with_the_checked_range(name):
     (line,) = [x for x in PROJECT["optional-dependencies"]["app"] if requirement_name(x)[0] == name]
     specifiers = {s.strip() for s in line.split(";")[0][len(name) :].split(",")}
     assert specifiers == {f">={low}", f"<{high}"}
+
+
+def test_the_patches_name_releases_within_the_checked_ranges():
+    """Each release of a patched framework that app/server/ names (``trame-server 4.1.0``,
+    ``wslink 2.6``: what a patch was read against) lies in its checked range, so that a range
+    moved in app/server/versions.py without reading the patches again shows here."""
+    named = []
+    for path in sorted((ROOT / "app" / "server").glob("*.py")):
+        text = path.read_text(encoding="utf-8")
+        for name, version in re.findall(r"\b(trame-server|wslink) (\d+\.\d+(?:\.\d+)?)\b", text):
+            named.append((path.name, name, version))
+    assert {n for _, n, _ in named} == set(CHECKED_RANGES)  # each patched framework is named
+    outside = [(f, n, v) for f, n, v in named if not in_range(v, *CHECKED_RANGES[n])]
+    assert outside == []
 
 
 def test_the_installed_frameworks_are_in_the_checked_range():

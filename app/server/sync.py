@@ -1,9 +1,10 @@
 """The shared state between the server and its pages: only declared keys from a client, the last
 write wins on every page.
 
-trame (server 4.1.0) applies a client's state update like this: it forwards the raw values at once
-to "every client but the last active one", then stores them, then runs the change callbacks, whose
-corrections follow. Three pages changing sliders at once ended with values none of them set last:
+trame (trame-server 4.1.0) applies a client's state update like this: it forwards the raw values at
+once to "every client but the last active one", then stores them, then runs the change callbacks,
+whose corrections follow. Three pages changing sliders at once ended with values none of them set
+last:
 
 * the trame page keeps a changed value "dirty" until its previous call is answered and then sends
   the value it holds *at that moment*; a value forwarded from another page in between overwrites

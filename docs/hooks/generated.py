@@ -98,6 +98,10 @@ def bench_markdown(path: Path = BENCH_JSON) -> str:
         f"16-sub-ray frame: {mem['peak']:.0f} MB ({mem['after_imports']:.0f} MB after the imports "
         "and the MRO).",
     ]
+    if "threads" in fig:  # the frames' threads and the scaling tables
+        from simcore.cli.bench.stages import format_scaling  # noqa: PLC0415  (the chain)
+
+        rows += ["", f"Frames on {fig['threads']} threads.", *format_scaling(fig["scaling"])]
     return "\n".join(head + rows)
 
 

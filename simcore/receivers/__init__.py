@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import importlib
 import warnings
-from importlib import metadata
 from types import MappingProxyType
 from typing import Any
 
@@ -103,6 +102,8 @@ def _entry_points() -> dict[str, str]:
     """The receivers installed packages declare (read once per process)."""
     global _installed
     if _installed is None:
+        from importlib import metadata  # noqa: PLC0415  (25-35 ms: only when a kind is asked for)
+
         found = metadata.entry_points(group=ENTRY_POINTS)
         _installed = {ep.name: ep.value for ep in found if ep.name not in BUILT_IN}
     return _installed

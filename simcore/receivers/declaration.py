@@ -89,10 +89,10 @@ class Control:
 
 @dataclass(frozen=True, kw_only=True)
 class StatsRow:
-    """A row of the app's stats table: its label and the value's text, ``text.format(...)`` of
-    the summary's figures, its noise figures (``noise.<name>``) and the scene's section values
-    (``scene.<section>.<key>``): e.g. ``"{noise.events:,.0f}"``. A row whose fields are missing
-    is left out."""
+    """A row of the app's stats table: its label and the value's text, ``str.format`` over the
+    frame's summary (``{summary[n_points]}``), its receiver's noise figures
+    (``{noise[events]:,.0f}``) and its scene (``{scene[gm][pulses]}``). A row whose fields are
+    missing is left out."""
 
     label: str
     text: str
@@ -133,7 +133,8 @@ class Receiver:
     short : a short name for the app's CSS classes (``receiver-gm``, ``gm-controls``)
     hint : the app's caption under its controls
     glossary : (term, explanation) pairs the app's glossary adds
-    description : one line for the app's stats ("Geiger-mode array, {scene.gm.pulses} pulses")
+    description : the app's stats row "Receiver", formatted as a :class:`StatsRow`'s text
+        ("Geiger-mode array, {scene[gm][pulses]} pulses")
     section : its own scene table, or None (it reads only the shared sections)
     check_scene : (scene) -> None, raises SceneError: the rules between its keys (or None)
     response_reads, detection_reads : (scene) -> hashable tuple of every scene value the step

@@ -112,10 +112,10 @@ def noisy_band_limited(
 
     The white sample variance ``S(t) / (2 dt)`` is drawn as a signal-free part for every sample
     plus an independent shot part where i_s > 0: the same normal law. The convolution is linear,
-    so h_B * (i_s + n) is computed as h_B * n over the whole rows (FFT, in x's dtype) plus
-    h_B * i_s in float64 on each signal row's own span: an FFT spreads its rounding error,
-    ~1e-7 of the largest value in float32, over the whole row, and an echo of SNR 1e3 is 1e5
-    sigma_n high.
+    so h_B * (i_s + n) is computed as h_B * n over the whole rows (the kernel's filter or an
+    FFT, in x's dtype) plus h_B * i_s in float64 on each signal row's own span: an FFT spreads
+    its rounding error, ~1e-7 of the largest value in float32, over the whole row, and an echo
+    of SNR 1e3 is 1e5 sigma_n high.
     """
     dt = band.dt_s
     m = band.half_width

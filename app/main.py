@@ -31,7 +31,7 @@ from app.server.process import (
     run_launcher,
     serve_until_stopped,
 )
-from app.state import STATE_KEYS
+from app.state import state_keys
 from app.ui.layout import build_layout
 
 _server_ids = itertools.count()
@@ -105,7 +105,7 @@ class LmapdApp:
 def client_keys() -> dict[str, security.Screen]:
     """The state keys a page may set, each with the screen its values pass at the door (the
     controls' ranges are checked after, by app.state.sanitize_controls and the fly-around)."""
-    keys: dict[str, security.Screen] = {key: security.scalar for key in STATE_KEYS}
+    keys: dict[str, security.Screen] = {key: security.scalar for key in state_keys()}
     keys["materials"] = security.mapping_of_names
     keys.update({key: security.scalar for key in flyaround.STATE_KEYS})
     keys.update({key: security.scalar for key in parts.STATE_KEYS})

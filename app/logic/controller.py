@@ -27,7 +27,7 @@ from app.logic.compare import FrameCompare
 from app.logic.controls import ControlPanel
 from app.logic.flyaround import FlyaroundLogic
 from app.logic.lessons import LessonGuide
-from app.logic.links import LINK_NAMES, controls_from_link, link_query
+from app.logic.links import controls_from_link, link_names, link_query
 from app.logic.pacing import FramePacer
 from app.logic.parts import PartHighlight
 from app.logic.physics_page import PhysicsPage
@@ -38,7 +38,7 @@ from app.logic.upload import LoadedTarget, TargetUploads
 from app.payloads import scene3d, stats, style
 from app.payloads import waveforms as waveforms_payload
 from app.runner import Outcome, Runner
-from app.state import SPECS, STATE_KEYS, Controls, controls_from_scene, preset_of
+from app.state import SPECS, Controls, controls_from_scene, preset_of, state_keys
 from simcore.target import fov_fill_distance_m, parts_table
 
 
@@ -97,7 +97,7 @@ class AppLogic:
             enabled=flow_control, max_in_flight=max_in_flight, ack_timeout_s=ack_timeout_s
         )
         self._init_state(startup_messages)
-        self.state.change(*STATE_KEYS)(self.on_controls_change)
+        self.state.change(*state_keys())(self.on_controls_change)  # the receivers' too
         self.flyaround = FlyaroundLogic(  # mode, time slider, play (its own state)
             self.state,
             fov_rad=self.base_scene.receive.fov_rad,
@@ -575,18 +575,21 @@ class AppLogic:
 
 
 PREVIEW_LABEL = "preview: 1 ray per pixel"
-# the core's names of the settings the page's controls set, with the controls' labels
-SCENE_KEY_LABELS = {
-    name: SPECS[key].label for key, (name, _) in LINK_NAMES.items() if key in SPECS
-} | {"detector.pixels": "Pixels", "laser.pulse_energy_j": "Pulse energy"}
+
+
+def scene_key_labels() -> dict[str, str]:
+    """The core's names of the settings the page's controls set, with the controls' labels."""
+    labels = {name: SPECS[key].label for key, (name, _) in link_names().items() if key in SPECS}
+    return labels | {"detector.pixels": "Pixels", "laser.pulse_energy_j": "Pulse energy"}
 
 
 def on_screen(message: str) -> str:
     """A core message with the names of the settings the page's controls set given as those
     controls' labels (gm.pulses -> 'Pulses per frame')."""
-    for name in sorted(SCENE_KEY_LABELS, key=len, reverse=True):
+    labels = scene_key_labels()
+    for name in sorted(labels, key=len, reverse=True):
         if "." in name:
-            message = message.replace(name, f"'{SCENE_KEY_LABELS[name]}'")
+            message = message.replace(name, f"'{labels[name]}'")
     return message
 
 

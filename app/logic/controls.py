@@ -10,7 +10,7 @@ import dataclasses
 import math
 from typing import Any
 
-from app.state import STATE_KEYS, Controls, sanitize_controls
+from app.state import Controls, sanitize_controls, state_keys
 
 
 class ControlPanel:
@@ -28,7 +28,7 @@ class ControlPanel:
 
     def read(self) -> Controls:
         """The page's controls made valid: corrections written back, messages shown."""
-        raw = {key: self.state[key] for key in STATE_KEYS}
+        raw = {key: self.state[key] for key in state_keys()}
         controls, messages = sanitize_controls(raw, self.current)
         if messages:
             self.state.input_message = "; ".join(messages)

@@ -29,16 +29,23 @@ from app.state import SPECS, Controls, echo, receiver_controls, sanitize_control
 
 MAX_LINK_SETTINGS = 64  # a longer query is refused whole
 MATERIAL_PREFIX = "target.materials."
-# the link's name of each numeric control, and the factor from its display unit to the SI one
-LINK_NAMES = {key: (key, 1.0) for key in SPECS} | {
+_SCENE_NAMES = {
     "pulse_energy_mj": ("pulse_energy_j", 1e-3),
     "sun_azimuth_deg": ("sun.azimuth_deg", 1.0),
     "sun_elevation_deg": ("sun.elevation_deg", 1.0),
     "filter_width_nm": ("receive.filter_width_m", 1e-9),
-    # the receivers' own controls, by their scene keys (their declarations')
-    **{name: (c.key, c.scale) for name, c in receiver_controls().items()},
 }
-CONTROL_OF = {name: (key, factor) for key, (name, factor) in LINK_NAMES.items()}
+
+
+def link_names() -> dict[str, tuple[str, float]]:
+    """The link's name of each numeric control, and the factor from its display unit to the SI
+    one: the receivers' own controls by their scene keys (their declarations', read at each use:
+    a receiver registered before the app starts is in)."""
+    own = {name: (c.key, c.scale) for name, c in receiver_controls().items()}
+    return {key: (key, 1.0) for key in SPECS} | _SCENE_NAMES | own
+
+
+LINK_NAMES = link_names()  # (those known when this module loads)
 # link name -> control
 CHOICES = {"preset": "preset", "sun.mode": "sun_mode", "receiver.kind": "receiver_kind"}
 IGNORED = ("token",)  # the page's access token rides in the same query
@@ -48,7 +55,7 @@ def link_settings(controls: Controls, initial: Controls) -> dict[str, str]:
     """The query settings that reproduce ``controls`` from ``initial`` (those that differ), in
     SI units, each value as text."""
     settings = {}
-    for key, (name, factor) in LINK_NAMES.items():
+    for key, (name, factor) in link_names().items():
         value = getattr(controls, key)
         if value != getattr(initial, key):
             settings[name] = _text(value * factor if factor != 1.0 else value)
@@ -79,14 +86,15 @@ def controls_from_link(settings: Any, initial: Controls) -> tuple[Controls, list
         return initial, [f"Link: expected name=value settings, got {echo(settings)}; ignored"]
     if len(settings) > MAX_LINK_SETTINGS:
         return initial, [f"Link: {len(settings)} settings is too many; ignored"]
+    control_of = {name: (key, factor) for key, (name, factor) in link_names().items()}
     raw: dict[str, Any] = {}
     materials = dict(initial.materials)
     messages = []
     for name, value in settings.items():
         if not isinstance(name, str) or name in IGNORED:
             continue
-        if name in CONTROL_OF:
-            key, factor = CONTROL_OF[name]
+        if name in control_of:
+            key, factor = control_of[name]
             raw[key] = value if factor == 1.0 else _display(value, factor)
         elif name in CHOICES:
             raw[CHOICES[name]] = value

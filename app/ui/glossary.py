@@ -4,6 +4,9 @@ dialog from the app bar."""
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator, Mapping
+from typing import Any
+
 from trame.widgets import html
 from trame.widgets import vuetify3 as v3
 
@@ -12,7 +15,7 @@ from app.ui.widgets import html_attributes
 from simcore import receivers
 
 # term -> what it means here, in a sentence or two a student can read at the slider
-GLOSSARY: dict[str, str] = {
+_SHARED_GLOSSARY: dict[str, str] = {
     "TNR": "Threshold-to-noise ratio: the detection threshold as a multiple of the noise's "
     "standard deviation σn. A pixel gives a point when its signal crosses TNR × σn: a higher "
     "TNR means fewer false alarms and more missed echoes. In Geiger mode it sets the count "
@@ -64,7 +67,7 @@ GLOSSARY: dict[str, str] = {
 }
 
 # each control's entries, first the one it sets
-CONTROL_TERMS: dict[str, tuple[str, ...]] = {
+_SHARED_TERMS: dict[str, tuple[str, ...]] = {
     "pitch_deg": ("Pose",),
     "azimuth_deg": ("Pose",),
     "distance_m": ("Range", "Pose"),
@@ -79,11 +82,40 @@ CONTROL_TERMS: dict[str, tuple[str, ...]] = {
     "sun_mode": ("Background light",),
     "preset": ("Fidelity",),
     "color_by": ("Range", "SNR", "Outlier"),
-    # the receivers' own controls: the terms their declarations name
-    **{name: c.terms for name, c in receiver_controls().items() if c.terms},
 }
-# and the terms the receivers' declarations explain
-GLOSSARY.update({term: text for r in receivers.receivers() for term, text in r.glossary})
+
+
+class _Merged(Mapping[str, Any]):
+    """A dict of the page's own entries and those the registered receivers declare (read at
+    each use: a receiver registered before the app starts is in)."""
+
+    def __init__(self, build: Callable[[], dict[str, Any]]):
+        self._build = build
+
+    def __getitem__(self, key: str) -> Any:
+        return self._build()[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._build())
+
+    def __len__(self) -> int:
+        return len(self._build())
+
+
+# term -> its explanation: the page's, then the receivers' declarations' (their glossary)
+GLOSSARY: Mapping[str, str] = _Merged(
+    lambda: {
+        **_SHARED_GLOSSARY,
+        **{term: text for r in receivers.receivers() for term, text in r.glossary},
+    }
+)
+# control -> its terms: the page's, then the receivers' controls' (the terms they name)
+CONTROL_TERMS: Mapping[str, tuple[str, ...]] = _Merged(
+    lambda: {
+        **_SHARED_TERMS,
+        **{name: c.terms for name, c in receiver_controls().items() if c.terms},
+    }
+)
 
 
 def control_text(key: str) -> str:
@@ -93,7 +125,10 @@ def control_text(key: str) -> str:
 
 def info_button(key: str, name: str) -> None:
     """A small info button beside control ``key`` (``name``: its label): its glossary entries
-    in a tooltip on hover or keyboard focus; a click opens the glossary at its first term."""
+    in a tooltip on hover or keyboard focus; a click opens the glossary at its first term. None
+    for a control without entries (a receiver's that names no term)."""
+    if key not in CONTROL_TERMS:
+        return
     with v3.VTooltip(location="top", max_width=360, open_on_focus=True):
         with v3.Template(v_slot_activator="{ props }"):
             v3.VBtn(

@@ -128,3 +128,18 @@ def test_installed_its_entry_point_makes_it_a_kind_of_the_lmapd_command(tmp_path
     done = subprocess.run([*lmapd, *argv], env=env, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     assert json.loads(summary.read_text())["receiver_kind"] == "ideal_counter"
+
+
+def test_the_app_started_with_it_shows_its_button_and_sliders_and_runs_it(counter):
+    from support.app_helpers import change, small_app, stat
+
+    with small_app(pixels=24) as app:
+        page = app.ui.html
+        assert "receiver-counter" in page and "Ideal counter" in page  # its button
+        assert "slider-counter_qe" in page and "slider-counter_threshold_pe" in page
+        assert "info-counter_threshold_pe" in page and "the only chance is" in page  # glossary
+        change(app, receiver_kind="ideal_counter", counter_qe=0.4)
+        scene = app.logic.last_frame.result.scene
+        assert scene.receiver.kind == "ideal_counter" and scene.counter.qe == 0.4
+        assert stat(app, "Receiver") == "ideal photon counter, QE 0.4"
+        assert "counter.qe=0.4" in app.state.share_query

@@ -76,6 +76,13 @@ RECEIVER = Receiver(
     label="Ideal counter",
     short="counter",
     description="ideal photon counter, QE {scene[counter][qe]:g}",
+    glossary=(
+        (
+            "Count threshold",
+            "Ideal counter: the photoelectrons of one pulse a pixel must count to detect its "
+            "echo (no noise: the only chance is the count's own Poisson spread).",
+        ),
+    ),
     controls=(
         Control(
             name="counter_qe",
@@ -85,6 +92,7 @@ RECEIVER = Receiver(
             lo=0.01,
             hi=1.0,
             step=0.01,
+            terms=("PDE",),
         ),
         Control(
             name="counter_threshold_pe",
@@ -94,6 +102,7 @@ RECEIVER = Receiver(
             lo=1.0,
             hi=100.0,
             step=1.0,
+            terms=("Count threshold",),
         ),
     ),
     stats_rows=(

@@ -85,6 +85,7 @@ def noisy_band_limited(
     white_level: np.ndarray | None = None,
     signal_rows: np.ndarray | None = None,
     out: np.ndarray | None = None,
+    rows_written: np.ndarray | None = None,
 ) -> np.ndarray:
     """Add the white current noise to the padded signal ``x`` IN PLACE, band-limit it.
 
@@ -108,7 +109,8 @@ def noisy_band_limited(
     band-limited noise stays below its level keeps x without the white noise (a caller that
     reads x only near higher samples saves writing it); None: x gets it in every row.
     ``signal_rows`` (n,) bool: the rows that may hold a signal (None: any); ``out`` (n, L): a
-    buffer for y (the kernel writes every sample of it).
+    buffer for y (the kernel writes every sample of it); ``rows_written`` (n,) bool: set False
+    by the kernel where a row's noise stayed below its ``white_level`` (left as it is otherwise).
 
     The white sample variance ``S(t) / (2 dt)`` is drawn as a signal-free part for every sample
     plus an independent shot part where i_s > 0: the same normal law. The convolution is linear,
@@ -137,8 +139,9 @@ def noisy_band_limited(
             key = int(rng.integers(1 << 63))
         shot_per_a = _shot_density_per_a(receiver) / (2.0 * dt)
         y = kernel.noise_rows(
-            x, key, stream0, scale, shot_per_a, band.taps, r, white_level, signal_rows, out
-        )
+            x, key, stream0, scale, shot_per_a, band.taps, r, white_level, signal_rows, out,
+            rows_written,
+        )  # fmt: skip
         white = None  # x holds signal + white noise already
     elif noise and photon is not None:  # photon statistics (montecarlo.photon.PhotonNoise)
         assert rng is not None and receiver is not None  # noise needs both

@@ -304,6 +304,7 @@ def discriminate(
     x_padded_a=None,
     band: BandLimit | None = None,
     t_open_s: float = -np.inf,
+    candidate_rows: np.ndarray | None = None,
 ) -> Stops:
     """Arming comparator + constant-fraction discriminator over whole waveforms (Eq. 19).
 
@@ -330,6 +331,8 @@ def discriminate(
     band : BandLimit, optional
     t_open_s : float -- the TDC's gate opens here [s]: a stop (t*) before it is not recorded and
         neither counts towards ``max_stops`` nor holds off later ones
+    candidate_rows : (r,) int, sorted, optional -- the only rows that may reach (1 -
+        ARMING_MARGIN) V_T (continuous arming) or V_T (sampled): the others are not searched
 
     Returns
     -------
@@ -340,8 +343,16 @@ def discriminate(
         raise ValueError(f"y_a must be (n, L), got shape {y.shape}")
     thr = float(threshold_a)
     continuous = x_padded_a is not None and band is not None
-    # one pass over y: the samples the comparators can need (near or above V_T)
-    candidates = np.flatnonzero(y >= min(thr, (1.0 - ARMING_MARGIN) * thr if continuous else thr))
+    # one pass over y (over its candidate rows): the samples the comparators can need (near or
+    # above V_T)
+    level = min(thr, (1.0 - ARMING_MARGIN) * thr if continuous else thr)
+    if candidate_rows is None:
+        candidates = np.flatnonzero(y >= level)
+    else:
+        rows = np.asarray(candidate_rows, dtype=np.int64)
+        at = np.flatnonzero(y[rows] >= level)
+        length = y.shape[1]
+        candidates = rows[at // length] * length + at % length
     row, j, t_a = _sample_crossings(y, thr, candidates)
     if x_padded_a is not None and band is not None:
         r2, j2, t2 = _refined_crossings(

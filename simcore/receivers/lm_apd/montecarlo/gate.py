@@ -212,6 +212,7 @@ def _gate_chunk(setup: _GateSetup, p0: int, p1: int, rng: np.random.Generator):
         if scale is not None and setup.per_pixel_threshold:
             level *= scale
     level[local] = -np.inf
+    written = np.ones(n, dtype=bool)  # the rows that may come near V_T (the kernel says which)
     y = noisy_band_limited(
         rng,
         x,
@@ -226,6 +227,7 @@ def _gate_chunk(setup: _GateSetup, p0: int, p1: int, rng: np.random.Generator):
         white_level=level,
         signal_rows=lit >= 0,
         out=y_buffer,
+        rows_written=written,
     )
     _filtered_signal_into(y, setup, lit[local], local)
     if scale is not None and setup.per_pixel_threshold:
@@ -247,6 +249,7 @@ def _gate_chunk(setup: _GateSetup, p0: int, p1: int, rng: np.random.Generator):
         x_padded_a=x if setup.continuous else None,
         band=setup.band if setup.continuous else None,
         t_open_s=2.0 * setup.gate_m[0] / C + setup.t_ref_s,
+        candidate_rows=np.flatnonzero(written) if setup.continuous else None,
     )
     del x, y
     # Eq. 26: e1 per stop, e2 per pixel (each pixel's TDC registers the start once)

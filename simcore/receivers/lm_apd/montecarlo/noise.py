@@ -208,7 +208,7 @@ def _polyphase(z, ptaps, n_taps, e0, r, yrow, acc):
 @jit()
 def _noise_rows(
     x, y, key, stream0, scale, shot_per_a, ptaps, n_taps, e0, r, taps, z, acc, zx, zf, level,
-    signal,
+    signal, written,
 ):  # fmt: skip
     """Every row: white impulses on samples r i, the filter into y, the shot noise where x > 0
     (scattered through ``taps``; looked for in the rows with ``signal``), all of it added to x;
@@ -246,7 +246,9 @@ def _noise_rows(
             for j in range(length):
                 above += yr[j] >= lv
             if above == 0:
+                written[row] = False
                 continue
+        written[row] = True
         for k in range(nz):
             xr[r * k] += z[k]
 
@@ -262,6 +264,7 @@ def noise_rows(
     level: np.ndarray | None = None,
     signal: np.ndarray | None = None,
     out: np.ndarray | None = None,
+    written: np.ndarray | None = None,
 ) -> np.ndarray:
     """Band-limited white and shot noise of each row of the padded signal ``x``, IN PLACE.
 
@@ -278,6 +281,8 @@ def noise_rows(
     signal : (n,) bool, optional -- the rows that may hold a signal (the others are not searched
         for shot noise); None: every row
     out : (n, L) x.dtype, optional -- y is written into it (a buffer kept between calls)
+    written : (n,) bool, optional -- set to which rows got the white impulses in x (the others'
+        noise stays below their level everywhere)
 
     Returns y : (n, L) x.dtype -- the band-limited noise at the output samples ('valid': y[j] is
     at x's sample j + m).
@@ -292,8 +297,10 @@ def noise_rows(
     acc = np.empty(_BLOCK, dtype=dtype)
     level = np.full(n, -np.inf) if level is None else np.asarray(level, dtype=np.float64)
     signal = np.ones(n, dtype=bool) if signal is None else np.asarray(signal, dtype=bool)
+    written = np.empty(n, dtype=bool) if written is None else written
     _noise_rows(
         x, y, np.uint64(key), np.uint64(stream0), np.ascontiguousarray(scale, dtype=dtype),
         float(shot_per_a), ptaps, n_taps, e0, int(r), taps, z, acc, _ZX, _ZF, level, signal,
+        written,
     )  # fmt: skip
     return y

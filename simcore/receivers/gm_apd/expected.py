@@ -24,6 +24,7 @@ from scipy import special
 from .coates import coates_bin_moments
 
 CELLS_PER_SIGMA = 2.0  # fine cells per jitter sd (and per bin at least 2, at most 16; 2 and 16
+# give the same bias within 0.3 mm at 0.1-10^4 pe, 250 ps bins, 200 ps jitter)
 
 
 BLOCK_VALUES = 1 << 20  # fine cells (or bins) of a block of pixels at most (8 MB per array)

@@ -21,7 +21,6 @@ from .expected import (
 )
 from .first_photon import predict_fit
 
-# give the same bias within 0.3 mm at 0.1-10^4 pe, 250 ps bins, 200 ps jitter)
 MAX_BINS = 512  # bins of a modelled window at most (finer TDC bins are merged)
 
 

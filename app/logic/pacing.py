@@ -9,6 +9,7 @@ stale frames.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Generic, TypeVar
 
 T = TypeVar("T")
@@ -20,21 +21,30 @@ class FramePacer(Generic[T]):
     enabled : False sends every frame at once (tests without a page)
     max_in_flight : frames sent and not yet reported drawn before the next one waits [1]
     ack_timeout_s : how long an unreported frame counts as in flight [s]
+    clock : the time [s] the frames in flight are aged by (tests: one that moves only when told)
     """
 
-    def __init__(self, *, enabled: bool = True, max_in_flight: int = 2, ack_timeout_s: float = 1.0):
+    def __init__(
+        self,
+        *,
+        enabled: bool = True,
+        max_in_flight: int = 2,
+        ack_timeout_s: float = 1.0,
+        clock: Callable[[], float] = time.perf_counter,
+    ):
         self.enabled = enabled
         self.max_in_flight = max_in_flight
         self.ack_timeout_s = ack_timeout_s
+        self.clock = clock
         self.held: T | None = None
-        self._inflight: dict[str, float] = {}  # frame key -> time sent [s, perf_counter]
+        self._inflight: dict[str, float] = {}  # frame key -> time sent [s, clock]
 
     def wait_s(self) -> float:
         """0 if a frame may be sent now, else how long until the oldest unreported frame stops
         counting [s]."""
         if not self.enabled:
             return 0.0
-        now = time.perf_counter()
+        now = self.clock()
         self._inflight = {k: t for k, t in self._inflight.items() if now - t < self.ack_timeout_s}
         if len(self._inflight) < self.max_in_flight:
             return 0.0
@@ -53,7 +63,7 @@ class FramePacer(Generic[T]):
 
     def sent(self, key: str) -> None:
         """Frame ``key`` went to the page; anything held is older and is dropped."""
-        self._inflight[key] = time.perf_counter()
+        self._inflight[key] = self.clock()
         self.held = None
 
     def drawn(self, key: object) -> bool:

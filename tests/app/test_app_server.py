@@ -6,7 +6,6 @@ dropped; frames are paced by the page's acknowledgements."""
 from __future__ import annotations
 
 import threading
-import time
 
 import pytest
 from support.app_helpers import change, settle
@@ -195,9 +194,22 @@ def test_reset_restores_the_starting_scene(app):
     assert app.logic.last_frame.result.scene.pose.distance_m == 500.0
 
 
+class StoppedClock:
+    """The pacer's clock, moved only by the test: a frame in flight stops counting after the
+    pacer's ack timeout of this clock, never because the machine is slow (under load a frame
+    took 0.4 s, so the first frame sent had timed out before the third came and was sent)."""
+
+    def __init__(self) -> None:
+        self.now_s = 0.0
+
+    def __call__(self) -> float:
+        return self.now_s
+
+
 def test_frames_wait_for_the_pages_acknowledgement_and_only_the_newest_waits(app):
     logic = app.logic
     logic.pacer.enabled, logic.pacer.max_in_flight = True, 2
+    logic.pacer.clock = StoppedClock()  # only the page's reports let frames go
     logic.on_frame_shown(app.state.frame_key)  # the page drew the current frame
     change(app, tnr=6)  # sent: nothing in flight
     first = app.state.frame_key
@@ -215,11 +227,12 @@ def test_frames_wait_for_the_pages_acknowledgement_and_only_the_newest_waits(app
 def test_a_page_that_never_reports_does_not_block_frames_for_long(app):
     logic = app.logic
     logic.pacer.enabled, logic.pacer.max_in_flight, logic.pacer.ack_timeout_s = True, 1, 0.05
+    logic.pacer.clock = clock = StoppedClock()
     logic.on_frame_shown(app.state.frame_key)
     change(app, tnr=6)  # sent; the page never reports it drawn
     change(app, wait_busy=False, tnr=7)  # waits for a report that never comes ...
     assert logic.pacer.held is not None
-    time.sleep(0.06)
+    clock.now_s += 0.06
     change(app, tnr=7.5)  # ... but only ack_timeout_s: the next frame goes out
     assert logic.last_frame.result.scene.timing.tnr == 7.5
 

@@ -188,12 +188,3 @@ def glossary_dialog() -> None:
                         ):
                             html.Dt(term, classes="glossary-term")
                             html.Dd(text, classes="glossary-text")
-
-
-CSS = """
-.glossary-list { display: flex; flex-direction: column; gap: 6px; }
-.glossary-term { font-weight: 600; color: #0d47a1; }
-.glossary-text { margin: 0 0 2px 0; font-size: 0.88rem; line-height: 1.45; }
-.glossary-asked { background: #fff8e1; border-radius: 4px; padding: 2px 6px; }
-.info-button.v-btn { margin-left: 2px; }
-"""

@@ -134,7 +134,6 @@ def build_layout(server) -> VAppLayout:
     server.state.wave_cursor = ""  # the waveform chart's cursor readout (app.ui.panels)
     server.state.client_only("wave_cursor")
     with VAppLayout(server, full_height=True) as layout:
-        client.Style(glossary.CSS)
         glossary.glossary_dialog()
         lessons.physics_dialog()
         client.ClientStateChange(value="frame_key", change=FRAME_SHOWN, trigger_on_create=True)

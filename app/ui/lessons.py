@@ -10,34 +10,9 @@ from trame.widgets import vuetify3 as v3
 from app.logic import LESSONS
 from app.ui.widgets import html_attributes
 
-CSS = """
-.lesson-button.v-btn { height: auto !important; min-height: 30px; padding: 4px 10px;
-  justify-content: flex-start; text-align: left; text-transform: none; letter-spacing: 0; }
-.lesson-button .v-btn__content { white-space: normal; line-height: 1.3; }
-.lesson-card { border-left: 4px solid #1565c0; position: sticky; top: 56px; z-index: 5;
-  max-height: 45vh; overflow-y: auto; }
-.lesson-head { flex-wrap: nowrap; overflow: hidden; }
-.lesson-head .lesson-title, .lesson-head .lesson-view-name { white-space: nowrap;
-  overflow: hidden; text-overflow: ellipsis; min-width: 0; }
-.lesson-head .lesson-title { flex: 0 1 auto; }
-.lesson-head .lesson-view-name { flex: 0 100 auto; }
-.lesson-view { outline: 3px solid #ffb300; outline-offset: 2px; transition: outline-color 0.5s; }
-@media (max-width: 600px) { .lesson-card { top: 48px; }
-  .lesson-head { flex-wrap: wrap; }
-  .lesson-head .lesson-title { white-space: normal; flex: 1 1 100%; } }
-.lesson-card .lesson-text { font-size: 0.88rem; line-height: 1.45; margin-bottom: 4px; }
-.lesson-card .lesson-label { font-weight: 600; color: #0d47a1; }
-.lesson-card code { font-size: 0.8rem; }
-.physics-text { font-size: 0.9rem; line-height: 1.5; }
-.physics-text table { border-collapse: collapse; margin: 6px 0; }
-.physics-text td, .physics-text th { border: 1px solid #e0e0e0; padding: 2px 6px; }
-.physics-text code { font-size: 0.8rem; }
-"""
-
 
 def lessons_panel() -> None:
     """The drawer's "Lessons" panel: a button per lesson (``open_lesson`` with its key)."""
-    client.Style(CSS)
     with v3.VExpansionPanels(variant="accordion", classes="mb-2 lessons-panel"):
         with v3.VExpansionPanel():
             v3.VExpansionPanelTitle(
@@ -61,60 +36,9 @@ def lessons_panel() -> None:
                     )
 
 
-# A lesson opened (the ``lesson`` state changed to a card): on a phone or a narrow window the
-# drawer closes; on a short screen (under 1000 px) the card folds to one line (its title, the
-# view it is about and a button to unfold it); the card stays at the top of the window while the
-# page scrolls, and the view it names is brought into sight just below it, outlined for a few
-# seconds (again when the lesson's frame arrives: a chart may grow meanwhile).
-LESSON_SCRIPT = """
-window.trame.utils.lmapdLesson = {
-  pending: null,
-  opened(lesson) {
-    const state = window.trame.state;
-    if (!lesson) { this.pending = null; return; }
-    if (window.innerWidth < 960) state.set('main_drawer', false);
-    if (lesson.view_selector === '.array-card') this.zoomTo(state.get('selected_pixels'));
-    state.set('lesson_folded', window.innerHeight < 1000);
-    this.pending = { selector: lesson.view_selector, until: performance.now() + 30000 };
-    setTimeout(() => this.show(), 350);  // after the drawer's and the card's transitions
-  },
-  zoomTo(pixels) {  // the array image zoomed (at most 4x) about the lesson's pixels
-    const n = (window.trame.state.get('array_image') || {}).pixels;
-    if (!n || !pixels || !pixels.length) return;
-    const rows = pixels.map((p) => p[0]), cols = pixels.map((p) => p[1]);
-    const extent = Math.max(Math.max(...rows) - Math.min(...rows),
-      Math.max(...cols) - Math.min(...cols)) + n / 8;
-    const s = Math.min(4, Math.max(1, n / extent)), m = 1 - 1 / s;
-    const u = (Math.max(...cols) + Math.min(...cols) + 1) / 2 / n;
-    const v = (Math.max(...rows) + Math.min(...rows) + 1) / 2 / n;
-    const clamp = (a) => Math.min(m, Math.max(0, a));
-    window.trame.state.set('array_zoom', { s, x: clamp(u - 0.5 / s), y: clamp(v - 0.5 / s) });
-  },
-  frame() {
-    if (this.pending && performance.now() < this.pending.until) setTimeout(() => this.show(), 50);
-  },
-  show() {
-    if (!this.pending) return;
-    const view = document.querySelector(this.pending.selector);
-    const card = document.querySelector('.lesson-card');
-    if (!view) return;
-    const bar = document.querySelector('.v-app-bar');
-    const above = (bar ? bar.getBoundingClientRect().bottom : 0)
-      + (card ? card.getBoundingClientRect().height : 0) + 8;
-    const top = view.getBoundingClientRect().top + window.scrollY - above;
-    window.scrollTo({ top: Math.max(0, top), behavior: 'instant' });
-    view.classList.add('lesson-view');
-    clearTimeout(this.timer);
-    this.timer = setTimeout(() => view.classList.remove('lesson-view'), 4000);
-  },
-};
-"""
-
-
 def lesson_card() -> None:
     """The open lesson's card, above the views (nothing when no lesson is open): folded, one
     line; unfolded, what to look at, why, what to try and where to read more."""
-    client.Script(LESSON_SCRIPT)
     client.ClientStateChange(
         value="lesson", change="trame.utils.lmapdLesson && trame.utils.lmapdLesson.opened($event)"
     )

@@ -24,8 +24,9 @@ SCRIPTS = (
     "view-scroll.js",  # the 3D views leave the page's scroll alone
     "cursor.js",  # the waveform chart's measuring cursor: trame.utils.lmapdCursor (app.ui.panels)
     "keyboard.js",  # log sliders' keys, the array image's cursor pixel, Copy link's answer
+    "lesson.js",  # an opened lesson brings its view into sight: trame.utils.lmapdLesson
 )
-STYLES = ("page.css", "markers.css")
+STYLES = ("page.css", "markers.css", "glossary.css", "lessons.css")
 
 
 def served_name(folder: Path = STATIC_DIR) -> str:

@@ -101,10 +101,12 @@ def test_the_app_draws_reacts_to_the_distance_slider_and_shows_a_clicked_pixels_
     assert page.title() == "lmapd-sim"
     # the page's own scripts and styles (app/static/, served by app.ui.static) loaded and applied
     assert page.evaluate(
-        "() => ['lmapd', 'lmapdBin', 'lmapdLink'].every((name) => window.trame.utils[name])"
+        "() => ['lmapd', 'lmapdBin', 'lmapdLink', 'lmapdLesson']"
+        ".every((name) => window.trame.utils[name])"
     )
     sheets = page.evaluate("() => [...document.styleSheets].map((s) => s.href || '')")
-    assert sum(href.endswith("/page.css") for href in sheets) == 1
+    for name in ("page.css", "markers.css", "glossary.css", "lessons.css"):
+        assert sum(href.endswith(f"/{name}") for href in sheets) == 1, (name, sheets)
     assert page.locator(".scene-box").evaluate("(el) => getComputedStyle(el).borderRadius") == "4px"
     assert (
         "Courtesy NASA/JPL-Caltech (NASA 3D Resources)" in page.locator(".nasa-credit").inner_text()

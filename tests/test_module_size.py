@@ -6,8 +6,6 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-import pytest
-
 ROOT = Path(__file__).resolve().parent.parent
 LIMIT = 500
 REASON = "Over 500 lines:"
@@ -36,10 +34,5 @@ def test_the_rule_finds_a_long_module_without_its_reason_and_accepts_one_with_it
     assert oversized(pkg) == ["pkg/long.py"]
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="simcore/receivers/lm_apd/montecarlo/gate.py (517 lines, the receivers' own, being "
-    "reworked) gives no reason yet",
-)
 def test_no_module_of_simcore_is_over_500_lines_without_saying_why():
     assert oversized(ROOT / "simcore") == []

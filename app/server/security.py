@@ -11,10 +11,14 @@ is in this module (and the state synchronisation in ``app.server.sync``):
 * a wslink ``LinkProtocol`` (registered through ``Server.add_protocol_to_configure``) decides the
   wslink hello (``validateToken``: only connections let in by the middleware), gives each
   connection a :class:`BoundedUnChunker` (one memory budget per connection and one in total, a
-  time-out for partial messages) and wraps three methods of wslink's handler instance: text
+  time-out for partial messages) and wraps four methods of wslink's handler instance: text
   messages and refused chunks close the connection; each call is checked against an allow-list
   before wslink dispatches it; errors sent to a client are one short line (the trace stays in
-  the server log).
+  the server log); answers wait for the state pushes (next);
+* the state pushes (``app.server.sync``) are sent at once, in order, and the answer to a page's
+  state update or trigger waits for the pushes to that page made before it, the state the call
+  caused (wslink's publish would send that on a later turn of the event loop, after the answer:
+  :meth:`Guard.send_state`).
 
 Browsers always send ``Origin`` on websockets, so a websocket without one is refused too: a
 non-browser client (the tests) must send the served address as its ``Origin``, as a page would.
@@ -39,7 +43,7 @@ from wslink.websocket import LinkProtocol
 
 from app.logic.upload import MAX_UPLOAD_BYTES
 from app.server import connections
-from app.server.sync import ClientStateSync
+from app.server.sync import STATE_TOPIC, ClientStateSync
 from app.state import MAX_MATERIAL_ENTRIES, echo
 
 log = logging.getLogger(__name__)
@@ -55,6 +59,10 @@ MAX_TEXT = 500  # a client's error report is logged at most this long
 MAX_TRIGGER_NAME = 100
 MAX_CHANGES = 256  # state changes in one update
 MAX_SCALAR_CHARS = 256  # a string value of a control
+STATE_PUSH_ID = f"publish:{STATE_TOPIC}:0"  # the id of wslink's publish of a state push
+# the calls answered after the state pushes to their page made before the answer (not
+# trame.state.get: its answer is a copy of the state, which a newer push must follow)
+ANSWERED_AFTER_PUSHES = ("trame.state.update", "trame.trigger")
 
 # what a client is told when a call fails or is refused: one short line, never a trace or a path
 SHORT_ERRORS = {
@@ -364,6 +372,8 @@ class Guard(LinkProtocol):
         self.unchunkers: dict[str, BoundedUnChunker] = {}
         self.n_refused_calls = 0
         self.n_closed = 0
+        self._sending: dict[str, set[asyncio.Task]] = {}  # page -> its state pushes under way
+        self._send_now = None  # wslink's handler's own sendWrappedMessage (see _wrap)
         self._calls = {
             "trame.state.get": self._no_args,
             "trame.state.update": self._state_update,
@@ -380,6 +390,7 @@ class Guard(LinkProtocol):
         if handler is not None and handler is not self.handler:
             self.handler = handler
             self.sync.clients = self.clients
+            self.sync.send = self.send_state
             self._wrap(handler)
 
     def onConnect(self, request, client_id):  # wslink's name
@@ -397,6 +408,7 @@ class Guard(LinkProtocol):
         if unchunker is not None:
             unchunker.release_pending_messages()
         self.sync.forget(client_id)
+        self._sending.pop(client_id, None)
 
     async def validateToken(self, token, client_id):  # wslink's name
         """The hello succeeds only on a connection the middleware let in (origin and token)."""
@@ -409,11 +421,47 @@ class Guard(LinkProtocol):
             return []
         return [c for c in list(handler.connections) if handler.isClientAuthenticated(c)]
 
+    def send_state(self, client_id: str, update: dict) -> None:
+        """Send page ``client_id`` a state push now (the sync's ``send``). wslink's publish sends
+        it on a later turn of the event loop, so the answer to the page's state update, sent at
+        once, went ahead of the values the update caused (``busy``, a correction): the page saw its
+        change answered and the server idle. A task started now keeps the pushes in order (tasks
+        start in the order they are made, wslink's send lock queues them in turn) and the answers
+        to the page wait for it (:meth:`_pushed`, see ``_wrap``)."""
+        handler, send = self.handler, self._send_now
+        try:
+            loop = asyncio.get_running_loop()
+        except RuntimeError:
+            loop = None
+        if handler is None or send is None or loop is None:  # not on the server's loop
+            self.sync.protocol.publish(STATE_TOPIC, update, client_id=client_id)
+            return
+        monitor = handler.network_monitor  # what wslink's publish counts, for trame's waits
+        monitor.on_enter()
+        task = loop.create_task(send(STATE_PUSH_ID, update, client_id=client_id))
+        pending = self._sending.setdefault(client_id, set())
+        pending.add(task)
+
+        def done(task: asyncio.Task) -> None:
+            pending.discard(task)
+            monitor.on_exit()
+            if not task.cancelled() and task.exception() is not None:
+                log.info("a state push was not sent: %s", task.exception())
+
+        task.add_done_callback(done)
+
+    async def _pushed(self, client_id: str) -> None:
+        """Wait until the state pushes to ``client_id`` made so far have been sent."""
+        pending = self._sending.get(client_id)
+        if pending:
+            await asyncio.wait(list(pending))
+
     # -- wrapping wslink's handler ---------------------------------------------------------------
     def _wrap(self, handler) -> None:
         on_message = handler.onMessage
         on_complete = handler.onCompleteMessage
         send_error = handler.sendWrappedError
+        self._send_now = send_message = handler.sendWrappedMessage
 
         async def guarded_message(is_binary, msg, client_id):
             try:
@@ -443,9 +491,23 @@ class Guard(LinkProtocol):
             text = message if code == REFUSED else SHORT_ERRORS.get(code, "Request refused")
             await send_error(rpcid, code, text, client_id=client_id)
 
+        async def answer_after_pushes(
+            rpcid, content, method="", client_id=None, skip_last_active_client=False
+        ):
+            if client_id is not None and method in ANSWERED_AFTER_PUSHES:
+                await self._pushed(client_id)  # the state the call caused goes first
+            await send_message(
+                rpcid,
+                content,
+                method=method,
+                client_id=client_id,
+                skip_last_active_client=skip_last_active_client,
+            )
+
         handler.onMessage = guarded_message
         handler.onCompleteMessage = guarded_call
         handler.sendWrappedError = short_error
+        handler.sendWrappedMessage = answer_after_pushes
 
     async def _close(self, client_id: str, why: str) -> None:
         log.warning("closing a connection: %s", why)
@@ -491,6 +553,7 @@ class Guard(LinkProtocol):
             return
         if method == "trame.state.update":
             self.sync.apply_client_changes(client_id, args[0])
+            # answered after the state it caused (busy, corrections): answer_after_pushes
             await self.handler.sendWrappedMessage(rpcid, None, method=method, client_id=client_id)
             return
         await dispatch({**rpc, "args": args, "kwargs": {}}, client_id)

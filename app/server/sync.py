@@ -25,7 +25,12 @@ and ``clear_state_client_cache`` of trame's protocol instance, see ``attach``):
 * a page that sends, for a key, a value the server pushed to it since it last sent that key is
   echoing a push that overwrote its own unsent change (see above): that write is dropped and the
   page is sent the current value, so the last genuine write wins and every page ends showing it
-  (a page that really chose such a value again sees it replaced by the current one).
+  (a page that really chose such a value again sees it replaced by the current one);
+* a page's state update is answered only after the values it caused have been sent to that page
+  (``busy``, a correction): wslink's publish sends on a later turn of the event loop, after an
+  answer sent at once, so a page that read "my change is answered" as "the server's state is
+  here" took the old, idle state for the final one. The Guard sends the pushes at once, in order,
+  and waits for those of the page before answering it (``send``).
 """
 
 from __future__ import annotations
@@ -53,6 +58,9 @@ class ClientStateSync:
         self.screens = dict(screens)
         self.protocol = None
         self.clients: Callable[[], list[str]] = list  # set by app.server.security.Guard
+        # sends one page a push at once (set by the Guard, see Guard.send_state); else wslink's
+        # publish, which sends it on a later turn of the event loop
+        self.send: Callable[[str, dict], None] | None = None
         self._sent: dict[str, dict[str, bytes]] = {}  # page -> key -> packed value it holds
         # page -> client key -> values pushed to it since it last sent that key (the newest few)
         self._pushed: dict[str, dict[str, list[bytes]]] = {}
@@ -93,7 +101,10 @@ class ClientStateSync:
                     remembered = pushed.setdefault(key, [])
                     remembered.append(packed[key])
                     del remembered[:-MAX_REMEMBERED]
-            self.protocol.publish(STATE_TOPIC, update, client_id=client_id)
+            if self.send is not None:
+                self.send(client_id, update)
+            else:
+                self.protocol.publish(STATE_TOPIC, update, client_id=client_id)
 
     # -- page -> server ----------------------------------------------------------------------------
     def apply_client_changes(self, client_id: str, changes: list[tuple[str, Any]]) -> dict:

@@ -332,6 +332,26 @@ def test_the_last_write_wins_on_every_page(app):
     assert a.seen("azimuth_deg") in ([], [11])  # A is never sent its own values
 
 
+def test_a_call_is_answered_after_the_state_it_caused(app):
+    """The page reads a call's answer as "the server has it": the values a state update or a
+    trigger caused for that page (a correction, the reset controls, ``busy`` for the new frame)
+    must reach it before the answer, else a page waiting for its calls to be answered and for an
+    idle server takes the old state for the final one (wslink sends a publish after an answer)."""
+
+    async def calls(session):
+        page = await connect(session, app)
+        update = await page.set_state(distance_m=1e9)  # clamped: the correction comes back
+        corrected = page.seen("distance_m")
+        trigger = await page.call("trame.trigger", ["reset_controls", [], {}])
+        reset = page.seen("distance_m")
+        await page.ws.close()
+        return update, corrected, trigger, reset
+
+    update, corrected, trigger, reset = run(calls)
+    assert "result" in update and corrected == [5000], (update, corrected)
+    assert "result" in trigger and reset == [5000, 500], (trigger, reset)
+
+
 # -- 4. connections ----------------------------------------------------------------------------
 def test_half_open_connections_are_evicted_and_a_page_still_loads(app):
     """Connections that never finish their request line are capped per address (the longest

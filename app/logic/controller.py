@@ -234,7 +234,8 @@ class AppLogic:
     ) -> None:
         """Compute on another target from now on (the uploads' callback): its base scene and
         engine, the controls a reset returns to, its parts' materials and mesh on the page, then
-        a new frame."""
+        a new frame. The target's parts and mesh reach the page in one push with ``busy`` (its
+        frame is under way): the page never shows them settled beside the old target's frame."""
         self.base_scene = scene
         self.engine = engine
         self.panel.use_target(initial_controls)
@@ -242,7 +243,7 @@ class AppLogic:
         self.compare.unpin()  # the pinned cloud was drawn in the old target's frame
         model = engine.model
         geometry = engine.target_geometry()
-        with self.state:
+        with self.state:  # one push, busy included (on_controls_change submits the frame)
             self.state.update(
                 {
                     "target_name": name,
@@ -257,8 +258,8 @@ class AppLogic:
                     "scene_camera": None,
                 }
             )
-        self.parts.reset()
-        self.on_controls_change()
+            self.on_controls_change()
+            self.parts.reset()  # (its own flush ends this one: everything above is set)
 
     def open_scene(self, scene: simcore.Scene, label: str) -> None:
         """Show ``scene`` (a design study's design): it becomes the scene a reset returns to,

@@ -420,7 +420,13 @@ class TargetUploads:
         if target.path is not None:  # the drop-down names the uploaded mesh while it is shown
             item = upload_item(self._file_name)
             items.append(item)
-        with self.state:
+        self.use_target(  # the target's parts and mesh, with busy (its frame is under way) ...
+            target.scene,
+            target.engine,
+            dataclasses.replace(self.builtin_initial, materials=materials),
+            model.name if target.path is None else item["title"],
+        )
+        with self.state:  # ... then the message: a page that sees it never sees the old parts
             self.state.update(
                 {
                     "upload_message": message,
@@ -429,12 +435,6 @@ class TargetUploads:
                     "target_choice": item["value"] if target.path else target.scene.target.mesh,
                 }
             )
-        self.use_target(
-            target.scene,
-            target.engine,
-            dataclasses.replace(self.builtin_initial, materials=materials),
-            model.name if target.path is None else item["title"],
-        )
         if old.path is not None and old.path != target.path:
             old.path.unlink(missing_ok=True)
 

@@ -5,6 +5,7 @@ sets the distance at which the target fills it, an upload's messages name its fi
 from __future__ import annotations
 
 import math
+import threading
 
 import pytest
 import trimesh
@@ -95,6 +96,39 @@ def test_an_uploads_messages_name_its_file_and_the_input_is_emptied_for_a_new_pi
     settle(app)
     assert app.state.target_choice == "mro"
     assert not any(i["value"].startswith("upload:") for i in app.state.target_items)
+
+
+def test_a_page_that_sees_an_uploads_parts_or_message_sees_busy(app, monkeypatch):
+    """An upload's parts reach the page with ``busy`` (its frame is under way), its message
+    after them: a page that sees either never sees the old target's parts or an idle server
+    with the old target's frame (a browser test waiting for the message, then for the page to
+    settle, read the MRO's parts). Its frame waits until the upload is shown."""
+    gate = threading.Event()
+    pushes = []
+    with small_app(model=app.uploads.builtin.engine.model) as fresh:
+        compute = fresh.logic.runner._compute
+
+        def gated(request):
+            assert gate.wait(60)
+            return compute(request)
+
+        monkeypatch.setattr(fresh.logic.runner, "_compute", gated)
+
+        @fresh.state.change("upload_message", "part_names")
+        def record(upload_message="", part_names=(), busy=False, **_):
+            pushes.append((upload_message, list(part_names), busy))
+
+        data = box_stl()
+        # called, not set in the state: its load finishes outside any flush of the state, as
+        # on the server (a future's callback), where each nested flush is a push of its own;
+        # without a server it has finished when on_upload returns
+        fresh.uploads.on_upload({"name": "box.stl", "size": len(data), "content": data})
+        gate.set()
+        settle(fresh)
+        parts = list(fresh.state.part_names)
+        assert len(parts) == 1 and not fresh.state.busy
+    assert pushes and all(busy for _, _, busy in pushes), pushes
+    assert [names for text, names, _ in pushes if text.startswith("Loaded 'box")] == [parts]
 
 
 TWO_OBJECTS_OBJ = b"""o box

@@ -19,7 +19,8 @@ CASES = {
     "statistical": {"pixels": 64},
     "montecarlo": {"pixels": 32, "fidelity.noise_model": "montecarlo"},
     "interactive": {"pixels": 64, "preset": "interactive", "pitch_deg": 30.0},
-    "geiger": {"pixels": 32, "receiver.kind": "gm_apd"},
+    # 64 x 64 pixels x 150 pulses: the avalanches drawn in two chunks on the threads
+    "geiger": {"pixels": 64, "receiver.kind": "gm_apd", "gm.pulses": 150},
     # by day, 96 x 96: the background in several pieces, the detection's stops and the cloud's
     # ground truth in the compiled kernels
     "daylight": {"pixels": 96, "sun.mode": "manual", "pitch_deg": 35.0, "tnr": 4.0},

@@ -22,21 +22,20 @@ probability ``p_ap`` an avalanche is followed by an afterpulse the instant the p
 instant, unless that neighbour is dead then (one generation, drawn after the pixels' own events).
 Every recorded avalanche is then timed with Gaussian jitter and the TDC's bin.
 
-Pixels are simulated in chunks of bounded size on two threads; each chunk draws from its own child
-generator spawned from the caller's, so a frame is reproducible for a seed whatever the threads.
+Pixels are simulated in chunks of bounded size on the frame's threads (simcore.parallel); each
+chunk draws from its own child generator spawned from the caller's, so a frame is reproducible
+for a seed whatever the threads.
 """
 
 from __future__ import annotations
 
-import os
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
+from ... import parallel
 from ...stage import Cancelled, stop_check
 
-_THREADS = max(1, min(2, os.cpu_count() or 1))
 PAIRS_PER_CHUNK = 1 << 19  # (pixel, pulse) pairs simulated at once by one thread
 X_END = 60.0  # G(x) beyond 60 s is 1 - 61 e^-60 = 1 - 5e-25: an element's process has ended
 EVENT_SIGNAL, EVENT_BACKGROUND, EVENT_AFTERPULSE, EVENT_CROSSTALK = 0, 1, 2, 3
@@ -157,7 +156,6 @@ def simulate_frame(
     rates: PixelRates,
     detector: Detector,
     n_pulses: int,
-    n_threads: int = _THREADS,
 ) -> Events:
     """Every recorded avalanche of ``n_pulses`` pulses of every pixel (module docstring).
 
@@ -179,11 +177,7 @@ def simulate_frame(
         return _chunk_events(g, rates, lit_of, p0, p1, detector, int(n_pulses))
 
     jobs = list(zip(bounds, children[:-1], strict=True))
-    if n_threads > 1 and len(jobs) > 1:
-        with ThreadPoolExecutor(max_workers=min(n_threads, len(jobs))) as pool:
-            parts = list(pool.map(work, jobs))
-    else:
-        parts = [work(j) for j in jobs]
+    parts = parallel.map_threads(work, jobs)
     pixel = np.concatenate([p[0] for p in parts])
     pulse = np.concatenate([p[1] for p in parts])
     t_s = np.concatenate([p[2] for p in parts])

@@ -8,6 +8,15 @@ import pytest
 from support.mesh_files import write_plates
 
 import simcore
+from simcore.cache import cache_dir
+
+# The compiled kernels' on-disk cache (numba) stays the user's, shared by the test processes and
+# the commands they start: under the fresh per-session cache folder below, every test process
+# (each pytest-xdist worker) and the first command each starts would compile every kernel again
+# (15-40 s each here). numba checks its cached code against the source, so nothing stale runs.
+# Set before numba is imported (simcore loads it on a frame's first use).
+if "NUMBA_CACHE_DIR" not in os.environ and cache_dir() is not None:
+    os.environ["NUMBA_CACHE_DIR"] = str(cache_dir() / "numba")
 
 
 @pytest.fixture

@@ -33,9 +33,12 @@ app: $(STAMP)
 	@echo "make: starting the app on $(HOST):$(PORT); it prints its address when it is ready (about 3 s). Ctrl+C stops it"
 	$(BIN)/lmapd app --host $(HOST) --port $(PORT)
 
-## make test: every test, the browser test in Debian's headless Chromium included
+## make test: every test, the browser test in Debian's headless Chromium included, on
+## TEST_WORKERS pytest processes (pytest-xdist; each test file on one of them)
+##   make test TEST_WORKERS=0     in one process
+TEST_WORKERS ?= 2
 test: $(STAMP) chromium
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile
 
 ## make bench: the core's stage timings (docs/performance.md)
 bench: $(STAMP)

@@ -5,6 +5,7 @@ The tests fail (never skip) when Chromium is missing: the README's `make test` i
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -29,8 +30,12 @@ def browser_context_args(browser_context_args):
 
 @pytest.fixture(scope="session")
 def artifacts_dir() -> Path:
-    ARTIFACTS.mkdir(exist_ok=True)
-    return ARTIFACTS
+    """test-artifacts/, or test-artifacts/<worker>/ on a pytest-xdist worker (``make test`` runs
+    two): each worker starts its own servers, which would otherwise write the same log files."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER")
+    path = ARTIFACTS / worker if worker else ARTIFACTS
+    path.mkdir(parents=True, exist_ok=True)
+    return path
 
 
 @pytest.fixture(scope="session")

@@ -38,7 +38,7 @@ def pulse_power_w(t_s, energy_j: float, tau_s: float, a: float = A_FWHM):
     """Eq. 1: P0(t) = Pmax (a t / tau) exp(1 - a t / tau) for t >= 0, with Pmax = a E / (e tau)."""
     t = np.asarray(t_s, dtype=np.float64)
     x = np.maximum(a * t / tau_s, 0.0)
-    p_max = a * energy_j / (np.e * tau_s)
+    p_max = a * energy_j / (math.e * tau_s)
     return np.where(t >= 0, p_max * x * np.exp(1.0 - x), 0.0)
 
 
@@ -58,7 +58,7 @@ def filtered_pulse_w(t_s, energy_j: float, tau_s: float, a: float, sigma_s: floa
     """
     t = np.asarray(t_s, dtype=np.float64)
     lam = a / tau_s
-    p_max = a * energy_j / (np.e * tau_s)
+    p_max = a * energy_j / (math.e * tau_s)
     mu = t - lam * sigma_s**2
     out = np.empty_like(t)
     neg = mu <= 0
@@ -71,7 +71,7 @@ def filtered_pulse_w(t_s, energy_j: float, tau_s: float, a: float, sigma_s: floa
     out[~neg] = np.exp(-lam * tp + 0.5 * (lam * sigma_s) ** 2) * (
         mp * special.ndtr(z) + sigma_s * np.exp(-0.5 * z * z) / np.sqrt(2 * np.pi)
     )
-    return p_max * np.e * lam * out
+    return p_max * math.e * lam * out
 
 
 @dataclass(frozen=True, kw_only=True)

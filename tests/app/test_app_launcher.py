@@ -29,6 +29,7 @@ import aiohttp
 import psutil
 import pytest
 from aiohttp import web
+from support.ci import skip_unless_ci
 from support.hostile_client import Client
 from support.launch import app_process
 
@@ -571,7 +572,7 @@ def test_a_thousand_half_open_connections_do_not_stop_a_page_load(tmp_path):
     connections.raise_open_file_limit()  # this process holds the client ends
     n_sockets = min(1000, resource.getrlimit(resource.RLIMIT_NOFILE)[0] - 200)
     if n_sockets < 500:
-        pytest.skip(f"this process may open only {n_sockets + 200} files")
+        skip_unless_ci(f"this process may open only {n_sockets + 200} files")
     with launcher_process(tmp_path, "--guard-idle-s", "3") as (url, log_path):
         parts = urllib.parse.urlsplit(url)
         half_open = []

@@ -19,6 +19,7 @@ from pathlib import Path
 import aiohttp
 import pytest
 from aiohttp import web
+from support.ci import skip_unless_ci
 from test_app_launcher import FAKE, MOVE, NAVIGATION, TOKEN, caps, run
 
 from app.server import connections
@@ -95,10 +96,9 @@ def nginx(config: Path, port: int):
         proc.wait(timeout=WAIT_S)
 
 
-@pytest.mark.skipif(
-    not (shutil.which("nginx") and shutil.which("openssl")), reason="needs nginx and openssl"
-)
 def test_the_documented_nginx_proxy_serves_a_session_over_https(tmp_path):
+    if not (shutil.which("nginx") and shutil.which("openssl")):
+        skip_unless_ci("needs nginx and openssl (.ci/run installs them)")
     proxy_port = free_port()
     public = f"https://localhost:{proxy_port}"
 

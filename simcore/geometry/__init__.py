@@ -15,7 +15,16 @@ The model: docs/physics.md#geometry (pose, pixel grid, first hits, refinement of
 
 from __future__ import annotations
 
-from .casting import HitBlock, Hits, RayCaster, cast_block, cast_ranges, incidence_cos
+from .casting import (
+    HitBlock,
+    Hits,
+    RayCaster,
+    RayHits,
+    cast_block,
+    cast_ranges,
+    cast_rays,
+    incidence_cos,
+)
 from .poses import (
     PoseInSensor,
     front_view_rotation,
@@ -63,12 +72,14 @@ __all__ = [
     "Hits",
     "PoseInSensor",
     "RayCaster",
+    "RayHits",
     "RayGrid",
     "TargetStage",
     "beam_edge",
     "cast",
     "cast_block",
     "cast_ranges",
+    "cast_rays",
     "cell_spread_m",
     "corner_directions",
     "front_view_rotation",

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .casting import HitBlock, Hits, RayCaster, cast_block, cast_ranges, incidence_cos
+from .casting import HitBlock, Hits, RayCaster, cast_block, cast_rays
 from .poses import PoseInSensor
 from .rays import RayGrid, subray_directions
 
@@ -172,13 +172,14 @@ def straddles(corner_values: np.ndarray) -> np.ndarray:
 
 def probe(caster: RayCaster, rays: RayGrid, pose: PoseInSensor) -> CornerSamples:
     """Cast the rays through the pixel corners."""
-    range_m, face, dirs_t = cast_ranges(caster, rays.corner_directions, pose)
-    hit = face >= 0
-    cos_t = incidence_cos(caster, face, dirs_t)
-    part = np.where(hit, caster.model.face_part[np.maximum(face, 0)], -1)
+    hits = cast_rays(caster, rays.corner_directions, pose)
+    assert hits.cos_theta is not None
+    part = np.where(hits.face >= 0, caster.model.face_part[np.maximum(hits.face, 0)], -1)
     n1 = rays.pixels + 1
     return CornerSamples(
-        range_m=range_m.reshape(n1, n1), part=part.reshape(n1, n1), cos_theta=cos_t.reshape(n1, n1)
+        range_m=hits.range_m.reshape(n1, n1),
+        part=part.reshape(n1, n1),
+        cos_theta=hits.cos_theta.reshape(n1, n1),
     )
 
 

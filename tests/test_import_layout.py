@@ -235,7 +235,8 @@ def test_the_public_names_are_the_lazy_exports_and_resolve():
 
 # simcore's floors, lowest first: a module may import its own floor and those below, never above
 SIMCORE_FLOORS = (
-    # foundations: constants, errors, files, caches, threads, materials, the calibration shapes
+    # foundations: constants, errors, files, caches, threads, materials, the calibration shapes,
+    # the plug-in points
     (
         "simcore._version",
         "simcore._assets",
@@ -249,11 +250,14 @@ SIMCORE_FLOORS = (
         "simcore.calibration",
         "simcore.illumination",
         "simcore.materials",
+        # the receivers' registry and what a receiver declares: the scene reads them for the valid
+        # kinds and the receivers' sections
+        "simcore.plugins",
     ),
     # the scene, the orbits and the Sun, what a stage is, the pulse
     ("simcore.scene", "simcore.orbit", "simcore.sun", "simcore.stage", "simcore.pulse"),
     # the chain's physics up to each pixel's detections: target, rays and hits, echo, background
-    # light, the receivers (their figures among them)
+    # light, the receivers (their declarations and their physics)
     (
         "simcore.target",
         "simcore.target_mesh",
@@ -280,22 +284,7 @@ SIMCORE_FLOORS = (
 )
 
 
-# modules placed by their exact name, not as a package with everything under it: the receivers'
-# registry and their declarations (each receiver's package names its section and its steps, by
-# name), which the scene reads for the valid kinds and the receivers' sections, sit on the
-# scene's floor; each receiver's physics stays on the chain's floor
-SIMCORE_EXACT = {
-    "simcore.receivers": 1,
-    "simcore.receivers.declaration": 1,
-    "simcore.receivers.lm_apd": 1,
-    "simcore.receivers.gm_apd": 1,
-    "simcore.receivers.gm_apd.section": 1,
-}
-
-
 def simcore_floor(name: str) -> int:
-    if name in SIMCORE_EXACT:
-        return SIMCORE_EXACT[name]
     for level, prefixes in enumerate(SIMCORE_FLOORS):
         if any(name == p or name.startswith(p + ".") for p in prefixes if p != "simcore"):
             return level
@@ -322,6 +311,20 @@ def test_the_floor_rule_finds_the_receivers_old_arrow_up_to_the_point_cloud():
 
 def test_simcore_never_imports_upwards():
     assert upward_imports(import_graph("simcore")) == []
+
+
+def test_simcore_s_packages_import_each_other_through_no_circle():
+    """Drawn at package granularity (``simcore.scene.keys`` is ``simcore.scene``), the arrows run
+    one way: the scene reads the receivers' registry from ``simcore.plugins``, below it, never from
+    ``simcore.receivers``, which reads the scene's fields."""
+    packages: dict[str, set[str]] = {}
+    for a, imported in import_graph("simcore").items():
+        for b in imported:
+            top_a, top_b = ".".join(a.split(".")[:2]), ".".join(b.split(".")[:2])
+            if top_a != top_b:
+                packages.setdefault(top_a, set()).add(top_b)
+    assert "simcore.receivers" not in packages["simcore.scene"]
+    assert cycles(packages) == []
 
 
 def test_the_apps_payloads_import_no_reproduction_code():

@@ -27,7 +27,7 @@ KINDS = tuple(receivers.BUILT_IN)
 # file -> why it may name a receiver (each entry is checked to be still needed)
 ALLOWED = {
     # the registry: the one list of the built-in kinds and where each declares itself
-    "simcore/receivers/__init__.py": "the registry's list of built-in receivers",
+    "simcore/plugins/registry.py": "the registry's list of built-in receivers",
     # the paper's reproduction and its figures are the LM-APD's (Eqs. 7-31) by definition
     "simcore/reproduce.py": "the paper's reproduction: the LM-APD's timing figures",
     "simcore/cli/reproduce/items_echo.py": "the paper's reproduction: the LM-APD's chain",

@@ -1,6 +1,7 @@
 """The receiver and detection stages: the scene's receiver (``receiver.kind``, found in the
-registry, :mod:`simcore.receivers`), its two steps, the range gate they share, and the stages'
-cache keys (``receiver.kind`` and the scene values the selected receiver declares it reads)."""
+registry, :mod:`simcore.plugins.registry`), its two steps, the range gate they share, and the
+stages' cache keys (``receiver.kind`` and the scene values the selected receiver declares it
+reads)."""
 
 from __future__ import annotations
 
@@ -9,9 +10,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..plugins.declaration import resolve
+from ..plugins.registry import get
 from ..stage import Stage, readonly
-from . import get
-from .declaration import resolve
 from .records import Detection, Response
 
 if TYPE_CHECKING:

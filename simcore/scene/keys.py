@@ -71,8 +71,8 @@ class SceneKeys:
     sun: Sun = field(default_factory=Sun)
     orbit: Orbit = field(default_factory=Orbit)
     background: Background = field(default_factory=Background)
-    # the receivers' own sections (``[gm]``: ``simcore.receivers``), those set to other than
-    # their defaults as (name, keys) pairs in name order; read as attributes (``scene.gm``)
+    # the receivers' own sections (``[gm]``: ``simcore.plugins.registry``), those set to other
+    # than their defaults as (name, keys) pairs in name order; read as attributes (``scene.gm``)
     receiver_sections: tuple[tuple[str, Any], ...] = ()
     quality: Quality = field(default_factory=Quality)
 

@@ -14,7 +14,7 @@ import math
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 
-from .. import receivers
+from ..plugins import registry
 from .fields import key
 
 
@@ -350,9 +350,10 @@ class Background:
     )
 
 
-# The valid values of ``receiver.kind`` are the receivers' registry's (``simcore.receivers``, which
-# loads only the standard library until a receiver runs): the scene holds only the names.
-DEFAULT_RECEIVER = receivers.DEFAULT_KIND
+# The valid values of ``receiver.kind`` are the receivers' registry's
+# (``simcore.plugins.registry``, which loads only the standard library until a receiver runs): the
+# scene holds only the names.
+DEFAULT_RECEIVER = registry.DEFAULT_KIND
 
 
 @dataclass(frozen=True)
@@ -362,7 +363,7 @@ class ReceiverSelection:
         "-",
         doc="the receiver behind the optics: lm_apd (the linear-mode APD chain, Eqs. 7-28) or "
         "gm_apd (a Geiger-mode single-photon array, the gm.* keys)",
-        choices=receivers.kinds,
+        choices=registry.kinds,
     )
 
 
@@ -394,7 +395,7 @@ class Quality:
     )
 
 
-# The shared sections, then each receiver's own (``receivers.sections()``: ``gm`` of the
+# The shared sections, then each receiver's own (``registry.sections()``: ``gm`` of the
 # Geiger-mode array), then the imaging-quality metrics'.
 _SHARED_SECTIONS = {
     "laser": Laser,
@@ -423,7 +424,7 @@ class Sections(Mapping[str, type]):
     _merged: dict[str, type] = {}
 
     def _all(self) -> dict[str, type]:
-        own = receivers.sections()  # the same object until a receiver is (un)registered
+        own = registry.sections()  # the same object until a receiver is (un)registered
         if own is not self._own:
             self._merged = {**_SHARED_SECTIONS, **own, **_LAST_SECTIONS}
             self._own = own
@@ -441,7 +442,7 @@ class Sections(Mapping[str, type]):
 
 SECTIONS = Sections()
 # the sections a receiver declares (the SceneKeys hold them apart from the shared ones)
-RECEIVER_SECTIONS = receivers.sections
+RECEIVER_SECTIONS = registry.sections
 
 
 # The quick parameters shared by the CLI --set, the app state and the Python keyword API.

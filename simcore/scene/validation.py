@@ -8,10 +8,10 @@ from __future__ import annotations
 import datetime
 import math
 
-from .. import receivers
 from ..errors import SceneError
 from ..orbit.epoch import EPHEMERIS_FIRST_UTC, EPHEMERIS_LAST_UTC, parse_utc
 from ..orbit.tle import check_tle
+from ..plugins import registry
 from .fields import check_fields
 from .keys import SceneKeys
 from .sections import SECTIONS
@@ -130,9 +130,9 @@ def validate(scene: SceneKeys) -> None:
             f"amplifiers.power_gains has {len(a.power_gains)}: give one of each per stage"
         )
     _check_sun(scene)
-    check = receivers.get(scene.receiver.kind).check_scene  # the receiver's own rules
+    check = registry.get(scene.receiver.kind).check_scene  # the receiver's own rules
     if check is not None:
-        receivers.resolve(check)(scene)
+        registry.resolve(check)(scene)
     q = scene.pose.quaternion_wxyz
     if q and (len(q) != 4 or not all(math.isfinite(x) for x in q) or math.hypot(*q) < 1e-9):
         raise SceneError(

@@ -12,6 +12,7 @@ from support.ideal_receiver import IDEAL, KIND, THRESHOLD_W
 
 import simcore
 from simcore import io, receivers
+from simcore.plugins import registry
 
 SMALL = {"pixels": 24, "fidelity.subrays": 1}
 
@@ -129,9 +130,9 @@ def test_the_design_studies_total_energy_counts_a_frames_pulses():
 
 
 def test_an_installed_receiver_that_does_not_load_is_left_out_with_a_warning(monkeypatch):
-    monkeypatch.setattr(receivers, "_installed", {"broken": "no_such_package.nowhere:RECEIVER"})
-    monkeypatch.setattr(receivers, "_broken", {})
-    monkeypatch.setattr(receivers, "_known", {})
+    monkeypatch.setattr(registry, "_installed", {"broken": "no_such_package.nowhere:RECEIVER"})
+    monkeypatch.setattr(registry, "_broken", {})
+    monkeypatch.setattr(registry, "_known", {})
     with pytest.warns(UserWarning, match="installed receiver 'broken'.*does not load"):
         assert [r.kind for r in receivers.receivers()] == ["lm_apd", "gm_apd"]
     assert receivers.kinds() == ("lm_apd", "gm_apd")

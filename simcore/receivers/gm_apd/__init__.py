@@ -13,7 +13,7 @@
   histogram gives at any flux, and the first-photon correction;
 - :mod:`.section`: its scene section ``[gm]`` and the rules between its keys.
 
-Here: its declaration, ``RECEIVER`` (:mod:`simcore.receivers.declaration`), which the registry
+Here: its declaration, ``RECEIVER`` (:mod:`simcore.plugins.declaration`), which the registry
 loads by name; declaring it loads none of the physics above (the steps are named, imported on
 first use).
 
@@ -22,7 +22,7 @@ The model: docs/physics.md#geiger-mode, docs/physics.md#gm-pileup.
 
 from __future__ import annotations
 
-from ..declaration import (
+from ...plugins.declaration import (
     Attribute,
     Control,
     Figure,

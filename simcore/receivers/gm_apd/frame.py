@@ -11,8 +11,8 @@ import numpy as np
 
 from ...constants import C, H
 from ...echo import EchoStage
+from ...plugins.declaration import FrameLoad
 from ...scene import Scene, SceneError
-from ..declaration import FrameLoad
 from . import events as ev
 from .limits import BYTES_PER_EVENT, MAX_EVENTS
 

@@ -7,14 +7,14 @@
 - :mod:`.montecarlo`: the waveform Monte Carlo model (noisy currents through the discriminator);
 - :mod:`.receiver`: the receiver's two steps (respond, detect) and the scene values they read.
 
-Here: its declaration, ``RECEIVER`` (:mod:`simcore.receivers.declaration`), which the registry
+Here: its declaration, ``RECEIVER`` (:mod:`simcore.plugins.declaration`), which the registry
 loads by name. Its keys are the shared sections ``detector``, ``amplifiers`` and ``timing`` (the
 paper's instrument), so it declares no section of its own.
 """
 
 from __future__ import annotations
 
-from ..declaration import Figure, Receiver, Series
+from ...plugins.declaration import Figure, Receiver, Series
 
 _STEPS = f"{__name__}.receiver"
 

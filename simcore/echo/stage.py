@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import geometry, materials
+from .. import geometry, materials, parallel
 from ..constants import C
 from ..pulse import PulseShape, cfd_delay_s, default_time_step_s, scene_pulse_shape
 from ..scene import Scene
@@ -82,12 +82,15 @@ def stage_echo(scene: Scene, tgt: geometry.TargetStage, hits: geometry.Hits) -> 
     t_d_s = cfd_delay_s(shape, scene.timing.cfd_delay_s)
     blocks = [_echo_block(scene, model, b, shape, dt_s, t_d_s) for b in hits.blocks()]
     pixel = np.concatenate([b["pixel"] for b in blocks])
-    order = np.argsort(pixel, kind="stable")
+    # one block of ascending pixels (no refinement) is taken as it is: no copies
+    order = None if len(blocks) == 1 else np.argsort(pixel, kind="stable")
     k_max = max(b["weights"].shape[1] for b in blocks)
 
     def merged(name, pad_value=0.0):
         parts = [b[name] for b in blocks]
-        if parts[0].ndim == 2:  # pad the sub-ray axis to the largest K (weight 0: no light)
+        if order is None:
+            return parts[0]
+        if name in ("arrivals", "weights"):  # pad the element axis to the largest (weight 0)
             parts = [
                 np.pad(p, ((0, 0), (0, k_max - p.shape[1])), constant_values=pad_value)
                 for p in parts
@@ -100,7 +103,7 @@ def stage_echo(scene: Scene, tgt: geometry.TargetStage, hits: geometry.Hits) -> 
         t_half_s=merged("t_half"),
         cfd_slope_per_s=merged("slope"),
         peak_raw_w_per_j=merged("peak_raw") if raw else None,
-        cfd_shot_level=np.concatenate([b["level"] for b in blocks])[order],
+        cfd_shot_level=merged("level"),
     )
     arrivals, weights = merged("arrivals"), merged("weights")
     readonly(arrivals, weights)
@@ -109,7 +112,7 @@ def stage_echo(scene: Scene, tgt: geometry.TargetStage, hits: geometry.Hits) -> 
         shape=shape,
         dt_s=dt_s,
         cfd_delay_s=t_d_s,
-        pixel=pixel[order],
+        pixel=pixel if order is None else pixel[order],
         arrivals_s=arrivals,
         weights=weights,
         features=feats,
@@ -118,18 +121,71 @@ def stage_echo(scene: Scene, tgt: geometry.TargetStage, hits: geometry.Hits) -> 
     )
 
 
+# Lit pixels per chunk of the element work below which a block's elements are made on the calling
+# thread alone (the numpy passes of a few thousand pixels take well under a millisecond)
+ELEMENT_CHUNK_PIXELS = 4096
+
+
 def _echo_block(
     scene, model, block: geometry.HitBlock, shape, dt_s, cfd_delay_s
 ) -> dict[str, np.ndarray]:
-    """Echo features of one block of pixels sampled with the same number of sub-rays."""
+    """Echo features of one block of pixels sampled with the same number of sub-rays: the
+    elements of chunks of its lit pixels on the frame's threads (numpy releases the GIL over
+    these arrays; each pixel's figures do not depend on the chunks), then the features of all."""
     rows = np.flatnonzero((block.face >= 0).any(axis=1))  # pixels that see the target
+    parts = min(parallel.threads(), len(rows) // ELEMENT_CHUNK_PIXELS) or 1
+    bounds = np.linspace(0, len(rows), parts + 1).astype(int)
+    face_material = model.face_material_library  # (a property computed on each use)
+    chunks = parallel.map_threads(
+        lambda part: _elements(scene, face_material, block, part, shape),
+        [rows[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True)],
+    )
+    width = max(c["weights"].shape[1] for c in chunks)
+    for c in chunks:  # merged chunks of fewer bins: padded (weight 0 at the pixel's first arrival)
+        extra = width - c["weights"].shape[1]
+        if extra:
+            c["weights"] = np.pad(c["weights"], ((0, 0), (0, extra)))
+            c["arrivals"] = np.hstack([c["arrivals"], np.repeat(c["t0"][:, None], extra, axis=1)])
+
+    def joined(name):
+        return chunks[0][name] if len(chunks) == 1 else np.concatenate([c[name] for c in chunks])
+
+    arrivals, weights = joined("arrivals"), joined("weights")
+    feats = echo_features(
+        shape,
+        arrivals,
+        weights,
+        dt_s,
+        cfd_delay_s,
+        scene.timing.cfd_fraction,
+        raw_peak=scene.uses("unfiltered_peak"),
+    )
+    return {
+        "pixel": joined("pixel"),
+        "arrivals": arrivals,
+        "weights": weights,
+        "peak": feats.peak_w_per_j,
+        "t_half": feats.t_half_s,
+        "slope": feats.cfd_slope_per_s,
+        "peak_raw": feats.peak_raw_w_per_j if feats.peak_raw_w_per_j is not None else None,
+        "level": feats.cfd_shot_level,
+        "material_id": joined("material_id"),
+        "facet_id": joined("facet_id"),
+    }
+
+
+def _elements(scene, face_material, block: geometry.HitBlock, rows, shape) -> dict[str, np.ndarray]:
+    """The echo elements of lit pixels ``rows`` of ``block`` (Eqs. 29-30): the pixels that
+    receive light (pixel), their elements' delays and weights (arrivals, weights: (n, M), split
+    by cell spread and merged within the window), their strongest element's material and facet
+    (material_id, facet_id) and each pixel's first arrival (t0, the delay of unused elements)."""
     face, range_m, cos_t = block.face[rows], block.range_m[rows], block.cos_theta[rows]
     lit_gain = illumination_gain(
         block.directions[rows], scene.illumination_angle_rad, scene.transmit.illumination
     )
     hit = face >= 0
     mat = np.full(face.shape, -1, np.int64)
-    mat[hit] = model.face_material_library[face[hit]]
+    mat[hit] = face_material[face[hit]]
     params = materials.parameter_table(materials.MATERIAL_NAMES)[mat[hit]]
     rho = np.zeros(face.shape)
     rho[hit] = materials.brdf(cos_t[hit], *params.T)
@@ -159,26 +215,15 @@ def _echo_block(
     if block.spread_m is not None:  # each sub-ray's cell: a pair of half echoes +- its spread
         arrivals, weights = split_elements(arrivals, weights, 2.0 * block.spread_m[rows] / C)
     window = scene.fidelity.merge_window * shape.rise_time_10_90_s
+    t0 = np.zeros(len(rows))
     if window > 0 and arrivals.shape[1] > 2:
+        t0 = np.where(weights > 0, arrivals, np.inf).min(axis=1) if len(rows) else t0
         arrivals, weights = merge_elements(arrivals, weights, window)
-    feats = echo_features(
-        shape,
-        arrivals,
-        weights,
-        dt_s,
-        cfd_delay_s,
-        scene.timing.cfd_fraction,
-        raw_peak=scene.uses("unfiltered_peak"),
-    )
     return {
         "pixel": block.pixel[rows],
         "arrivals": arrivals,
         "weights": weights,
-        "peak": feats.peak_w_per_j,
-        "t_half": feats.t_half_s,
-        "slope": feats.cfd_slope_per_s,
-        "peak_raw": feats.peak_raw_w_per_j if feats.peak_raw_w_per_j is not None else None,
-        "level": feats.cfd_shot_level,
+        "t0": t0,
         "material_id": material_id.astype(np.int32),
         "facet_id": facet_id.astype(np.int32),
     }

@@ -10,8 +10,8 @@ import sys
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import dataclass, field, replace
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -127,6 +127,11 @@ def montecarlo_gate(
     """Waveform Monte Carlo of one flash over the whole gate of every pixel
     (docs/physics.md#monte-carlo).
 
+    The steps: the echoes checked and indexed (:func:`lit_echoes`), the samples to simulate
+    (:func:`simulated_span`), the :class:`.chunk.GateSetup` every chunk reads, the chunks
+    (:func:`chunk_jobs`) run on worker threads (:func:`run_chunks`), their stops collected
+    (:func:`collected`).
+
     Parameters
     ----------
     rng : numpy.random.Generator -- the flash's noise key is drawn from it (each pixel's white
@@ -167,27 +172,9 @@ def montecarlo_gate(
     if arming not in ("continuous", "sampled"):
         raise ValueError(f"arming must be 'continuous' or 'sampled', got {arming!r}")
     t_start = time.perf_counter()
-    pixel = np.asarray(pixel, dtype=np.int64).reshape(-1)
-    arrivals = np.atleast_2d(np.asarray(arrivals_s, dtype=np.float64))
-    weights = np.atleast_2d(np.asarray(weights_per_j, dtype=np.float64))
-    if arrivals.shape != weights.shape or arrivals.shape[0] != len(pixel):
-        raise ValueError(
-            f"arrivals_s {arrivals.shape} and weights_per_j {weights.shape} must be (n, K) "
-            f"with n = len(pixel) = {len(pixel)}"
-        )
-    if len(pixel) and (pixel.min() < 0 or pixel.max() >= n_pixels_total):
-        raise ValueError(f"pixel indices must lie in [0, {n_pixels_total})")
+    echoes = lit_echoes(pixel, arrivals_s, weights_per_j, n_pixels_total, shape.tau_s)
     band = band_limit(dt_s, receiver.bandwidth_hz)
-    t_ref = reference_stop_s(shape, band, t_d_s, cfd_fraction)
-    t_lo, n_samples = gate_samples(gate_center_m, gate_m, dt_s)
-    lit_of_pixel = np.full(n_pixels_total, -1, dtype=np.int64)
-    lit_of_pixel[pixel] = np.arange(len(pixel))
-    has = weights > 0
-    lead = lead_samples(np.where(has, arrivals, np.inf).min(initial=np.inf), t_lo, dt_s, band)
-    t_lo, n_samples = t_lo - lead * dt_s, n_samples + lead
-    tau = shape.tau_s
-    window_lo = np.where(has, arrivals, np.inf).min(axis=1, initial=np.inf) - tau
-    window_hi = np.where(has, arrivals, -np.inf).max(axis=1, initial=-np.inf) + 2.0 * tau
+    t_lo, n_samples = simulated_span(echoes, gate_center_m, gate_m, dt_s, band)
     setup = GateSetup(
         shape=shape,
         band=band,
@@ -202,35 +189,112 @@ def montecarlo_gate(
         first_stop=first_stop,
         max_stops=None if max_stops is None else int(max_stops),
         resolution_s=float(resolution_s),
-        t_ref_s=t_ref,
+        t_ref_s=reference_stop_s(shape, band, t_d_s, cfd_fraction),
         raw_end_s=raw_end_s(shape),
-        tau_s=tau,
+        tau_s=shape.tau_s,
         noise=noise,
         continuous=arming == "continuous",
-        lit_of_pixel=lit_of_pixel,
-        arrivals=arrivals,
-        weights=weights,
-        window_lo=window_lo,
-        window_hi=window_hi,
+        lit_of_pixel=echoes.lit_of_pixel,
+        arrivals=echoes.arrivals,
+        weights=echoes.weights,
+        window_lo=echoes.window_lo,
+        window_hi=echoes.window_hi,
         noise_scale=_noise_scale(receiver, background_a, n_pixels_total),
         per_pixel_threshold=bool(per_pixel_threshold),
         photon=photon,
         gate_m=(max(0.0, gate_center_m - 0.5 * gate_m), gate_center_m + 0.5 * gate_m),
-        key=int(rng.integers(1 << 63)),
+        key=int(rng.integers(1 << 63)),  # drawn before the chunks' streams are spawned
     )
-    rows = max(1, int(max_bytes) // (_BYTES_PER_SAMPLE * (n_samples + 2 * band.half_width)))
+    jobs = chunk_jobs(rng, n_pixels_total, n_samples + 2 * band.half_width, max_bytes)
+    t_setup = time.perf_counter() - t_start
+    parts, (t_wave, t_disc) = run_chunks(setup, jobs, n_pixels_total, n_threads)
+    t_collect = time.perf_counter()
+    result = collected(parts, echoes.pixel, setup, n_pixels_total)
+    timings = {
+        "setup": t_setup,
+        "waveforms_thread_s": t_wave,
+        "discriminator_thread_s": t_disc,
+        "collect": time.perf_counter() - t_collect,
+        "total": time.perf_counter() - t_start,
+    }
+    return replace(result, timings_s=timings)
+
+
+class LitEchoes(NamedTuple):
+    """The lit pixels' echoes as the gate reads them.
+
+    pixel : (n,) int64 -- flat index of each echo pixel
+    arrivals, weights : (n, K) float64 -- two-way delays [s] and weights [1/J] (0: no element)
+    lit_of_pixel : (n_total,) int64 -- each pixel's row in the echo arrays, -1 if unlit
+    window_lo, window_hi : (n,) float64 -- each pixel's detection window [s]: from one pulse
+        width tau before its first element to two after its last
+    """
+
+    pixel: np.ndarray
+    arrivals: np.ndarray
+    weights: np.ndarray
+    lit_of_pixel: np.ndarray
+    window_lo: np.ndarray
+    window_hi: np.ndarray
+
+
+def lit_echoes(pixel, arrivals_s, weights_per_j, n_pixels_total: int, tau_s: float) -> LitEchoes:
+    """The echo inputs checked (shapes, pixel indices in [0, n_pixels_total)) and indexed, with
+    each lit pixel's detection window [first arrival - tau, last arrival + 2 tau] [s]."""
+    pixel = np.asarray(pixel, dtype=np.int64).reshape(-1)
+    arrivals = np.atleast_2d(np.asarray(arrivals_s, dtype=np.float64))
+    weights = np.atleast_2d(np.asarray(weights_per_j, dtype=np.float64))
+    if arrivals.shape != weights.shape or arrivals.shape[0] != len(pixel):
+        raise ValueError(
+            f"arrivals_s {arrivals.shape} and weights_per_j {weights.shape} must be (n, K) "
+            f"with n = len(pixel) = {len(pixel)}"
+        )
+    if len(pixel) and (pixel.min() < 0 or pixel.max() >= n_pixels_total):
+        raise ValueError(f"pixel indices must lie in [0, {n_pixels_total})")
+    lit_of_pixel = np.full(n_pixels_total, -1, dtype=np.int64)
+    lit_of_pixel[pixel] = np.arange(len(pixel))
+    has = weights > 0
+    window_lo = np.where(has, arrivals, np.inf).min(axis=1, initial=np.inf) - tau_s
+    window_hi = np.where(has, arrivals, -np.inf).max(axis=1, initial=-np.inf) + 2.0 * tau_s
+    return LitEchoes(pixel, arrivals, weights, lit_of_pixel, window_lo, window_hi)
+
+
+def simulated_span(
+    echoes: LitEchoes, gate_center_m: float, gate_m: float, dt_s: float, band: BandLimit
+) -> tuple[float, int]:
+    """Time of the first simulated sample [s] and the sample count: the range gate's samples
+    (:func:`gate_samples`) and, before them, the lead an echo near its opening needs
+    (:func:`lead_samples`)."""
+    t_lo, n_samples = gate_samples(gate_center_m, gate_m, dt_s)
+    first_arrival_s = np.where(echoes.weights > 0, echoes.arrivals, np.inf).min(initial=np.inf)
+    lead = lead_samples(first_arrival_s, t_lo, dt_s, band)
+    return t_lo - lead * dt_s, n_samples + lead
+
+
+def chunk_jobs(
+    rng: np.random.Generator, n_pixels_total: int, row_samples: int, max_bytes: int
+) -> list[tuple[int, int, np.random.Generator]]:
+    """The gate's chunks of pixels, (p0, p1, generator): as many rows of ``row_samples`` padded
+    samples as fit ``max_bytes`` per worker thread, each chunk with a child of ``rng``."""
+    rows = max(1, int(max_bytes) // (_BYTES_PER_SAMPLE * row_samples))
     bounds = [(p, min(p + rows, n_pixels_total)) for p in range(0, n_pixels_total, rows)]
     children = rng.spawn(len(bounds))
-    jobs = [(p0, p1, g) for (p0, p1), g in zip(bounds, children, strict=True)]
-    t_setup = time.perf_counter() - t_start
+    return [(p0, p1, g) for (p0, p1), g in zip(bounds, children, strict=True)]
 
+
+def run_chunks(
+    setup: GateSetup, jobs: list, n_pixels_total: int, n_threads: int | None
+) -> tuple[list[dict[str, Any]], tuple[float, float]]:
+    """Every chunk through :func:`.chunk.gate_chunk` on worker threads, in order: their stops
+    and the thread-seconds of the waveforms and of the discriminator [s]. A frame that runs past
+    ``PROGRESS_DELAY_S`` shows its progress on a terminal."""
     parts = []
     t_wave = t_disc = 0.0
     work: Callable[[Any], Any] = lambda job: _gate_chunk(setup, *job)  # noqa: E731
     from tqdm import tqdm  # noqa: PLC0415  (only a long frame shows it)
 
-    # a frame that runs past PROGRESS_DELAY_S shows its progress on a terminal (512 x 512 px
-    # take about a minute on two cores); piped or captured output stays silent (disable=None)
+    # 512 x 512 px take about a minute on two cores; piped or captured output stays silent
+    # (disable=None)
     bar = tqdm(
         total=n_pixels_total,
         desc="Monte Carlo",
@@ -248,8 +312,14 @@ def montecarlo_gate(
             t_wave += tw
             t_disc += td
             bar.update(p1 - p0)
+    return parts, (t_wave, t_disc)
 
-    t_collect = time.perf_counter()
+
+def collected(
+    parts: list[dict[str, Any]], pixel: np.ndarray, setup: GateSetup, n_pixels_total: int
+) -> McResult:
+    """The chunks' stops as one McResult (without timings): per lit pixel its stop count and its
+    first detection stop's range; every other stop a false alarm."""
     cat = {k: np.concatenate([p[k] for p in parts]) for k in ("pixel", "lit", "t_s", "range_m")}
     detection = np.concatenate([p["detection"] for p in parts])
     n_lit = len(pixel)
@@ -263,13 +333,7 @@ def montecarlo_gate(
     range_m = np.full(n_lit, np.nan)
     range_m[first_lit] = det_r[order][first_at]
     fa = ~detection
-    timings = {
-        "setup": t_setup,
-        "waveforms_thread_s": t_wave,
-        "discriminator_thread_s": t_disc,
-        "collect": time.perf_counter() - t_collect,
-        "total": time.perf_counter() - t_start,
-    }
+    dt_s = setup.band.dt_s
     return McResult(
         pixel=pixel,
         detected=detected,
@@ -278,12 +342,11 @@ def montecarlo_gate(
         false_alarm_pixel=cat["pixel"][fa],
         false_alarm_range_m=cat["range_m"][fa],
         n_pixels_total=int(n_pixels_total),
-        gate_s=(t_lo, t_lo + (n_samples - 1) * dt_s),
-        reference_stop_s=t_ref,
+        gate_s=(setup.t_lo, setup.t_lo + (setup.n_samples - 1) * dt_s),
+        reference_stop_s=setup.t_ref_s,
         threshold_a=setup.threshold_a,
         dt_s=float(dt_s),
         n_unfired=sum(p["unfired"] for p in parts),
-        timings_s=timings,
     )
 
 

@@ -1,5 +1,6 @@
 """The 3D scene's payloads: the display frame and cameras, the target mesh and its facet colours,
-the lidar's frustum and footprint, the material legend.
+the lidar's frustum and footprint, the material legend, the Sun and the Earth and the sides of
+the target they light.
 
 Both 3D views share one display frame fixed to the target: the target frame rotated so that the
 zero pose (pitch = azimuth = 0) looks along the display's -Z with image-up along +Y. The target
@@ -254,9 +255,16 @@ def azimuth_elevation_deg(direction_body: np.ndarray) -> tuple[float, float]:
 def sun_and_earth(scene: simcore.Scene, model: simcore.TargetModel, frame: DisplayFrame) -> dict:
     """The state of the scene view's Sun and Earth: an arrow towards each (vtk.js mesh states in
     the display frame, around the target's centre), and the legend's words with their angles in
-    the target's frame (as the Sun control gives them). No arrows and empty words for
-    ``sun.mode = none`` (the paper's dark sky)."""
-    none = {"sun_arrow": None, "earth_arrow": None, "sun_text": "", "earth_text": ""}
+    the target's frame (as the Sun control gives them), and the lit side (:func:`lit_side`; the
+    Earth's only where the scene has its light: ``background.earth`` and an albedo). No arrows,
+    empty words and no lit side for ``sun.mode = none`` (the paper's dark sky)."""
+    none = {
+        "sun_arrow": None,
+        "earth_arrow": None,
+        "sun_text": "",
+        "earth_text": "",
+        "lit_side": None,
+    }
     if scene.sun.mode == "none":
         return none
     from simcore import sun  # noqa: PLC0415  (the ephemeris and the orbits: only with a Sun)
@@ -267,8 +275,10 @@ def sun_and_earth(scene: simcore.Scene, model: simcore.TargetModel, frame: Displ
     center = frame.from_target(model.mesh.bounds.mean(axis=0)[None, :])[0]
     update: dict = {}
     to_earth = np.asarray(geo.earth_center_body_m, dtype=np.float64)
+    mesh_dirs = {}
     for name, body in (("sun", geo.direction_body), ("earth", to_earth)):
         mesh_dir = model.body_from_mesh.T @ np.asarray(body, dtype=np.float64)  # the mesh frame
+        mesh_dirs[name] = mesh_dir
         points, segments = arrow_lines(
             center, frame.from_target(mesh_dir[None, :])[0], model.radius_m
         )
@@ -289,4 +299,67 @@ def sun_and_earth(scene: simcore.Scene, model: simcore.TargetModel, frame: Displ
         else f"azimuth {az:.0f}°, elevation {el:.0f}°"
     )
     update["earth_text"] = f"Earth: {altitude_km:,.0f} km {where}"
+    with_earth = scene.background.earth and scene.background.earth_albedo > 0
+    update["lit_side"] = lit_side(
+        model,
+        None if geo.eclipsed else mesh_dirs["sun"],
+        mesh_dirs["earth"] if with_earth else None,
+    )
     return update
+
+
+# the lit side: the facets that face the Sun, and those that face the Earth (its Earthshine)
+LIT_NONE_COLOR = "#33363e"  # a facet that faces neither (darker than the hidden facets' grey)
+LIT_BOTH_COLOR = "#9ccc65"  # a facet that faces both (the Sun's yellow and the Earth's blue)
+
+
+def facing(model: simcore.TargetModel, direction_mesh: np.ndarray) -> np.ndarray:
+    """(n_faces,) bool: the facets whose outward normal (the mesh's winding) points towards
+    ``direction_mesh`` (3,), a direction in the mesh frame: n . d > 0. Geometry only: a facet
+    another part shadows still counts."""
+    d = np.asarray(direction_mesh, dtype=np.float64)
+    return model.mesh.face_normals @ (d / np.linalg.norm(d)) > 0.0
+
+
+def lit_side(
+    model: simcore.TargetModel, sun_mesh: np.ndarray | None, earth_mesh: np.ndarray | None
+) -> dict:
+    """The scene view's lit side: which facets face the Sun and which the Earth.
+
+    sun_mesh, earth_mesh : (3,) directions towards the Sun and the Earth's centre in the mesh
+    frame, or None (the target in the Earth's shadow: no facet sunlit; no Earth in the scene).
+    Returns ``sun`` and ``earth``: one bit per facet, in the mesh's facet order, packed eight to
+    a byte, the first facet in the high bit (``numpy.packbits``; typed arrays), ``n_facets``,
+    ``palette`` (the RGB of a facet lit by neither, the Sun, the Earth, both: indexed by
+    sun + 2 earth; ``app/static/lit.js`` turns the bits into the facets' colours) and ``rows``
+    (the legend's: label, colour, facets).
+    """
+    n = len(model.mesh.faces)
+    none = np.zeros(n, dtype=bool)
+    sun = none if sun_mesh is None else facing(model, sun_mesh)
+    earth = none if earth_mesh is None else facing(model, earth_mesh)
+    colors = (LIT_NONE_COLOR, SUN_COLOR, EARTH_COLOR, LIT_BOTH_COLOR)
+    only = " only" if earth_mesh is not None else ""
+    rows = [
+        (
+            f"faces the Sun{only}" if sun_mesh is not None else "sunlit: none (Earth's shadow)",
+            SUN_COLOR,
+            sun & ~earth,
+        )
+    ]
+    if earth_mesh is not None:
+        rows += [
+            ("faces the Earth only (Earthshine)", EARTH_COLOR, earth & ~sun),
+            ("faces both", LIT_BOTH_COLOR, sun & earth),
+        ]
+    rows.append(("faces neither", LIT_NONE_COLOR, ~sun & ~earth))
+    return {
+        "sun": encode.typed_array(np.packbits(sun)),
+        "earth": encode.typed_array(np.packbits(earth)),
+        "n_facets": n,
+        "palette": [list(encode.rgb_of(c)) for c in colors],
+        "rows": [
+            {"label": label, "color": color, "facets": int(np.count_nonzero(mask))}
+            for label, color, mask in rows
+        ],
+    }

@@ -14,39 +14,18 @@ from app.state import receiver_controls
 from app.ui.widgets import html_attributes
 from simcore import receivers
 
-# term -> what it means here, in a sentence or two a student can read at the slider
-_SHARED_GLOSSARY: dict[str, str] = {
+# term -> what it means here, in a sentence or two a student can read at the slider: the words
+# of every receiver (a receiver's own, and its half of a shared word, are in its declaration)
+_GENERAL_GLOSSARY: dict[str, str] = {
     "TNR": "Threshold-to-noise ratio: the detection threshold as a multiple of the noise's "
     "standard deviation σn. A pixel gives a point when its signal crosses TNR × σn: a higher "
-    "TNR means fewer false alarms and more missed echoes. In Geiger mode it sets the count "
-    "threshold's false-alarm rate.",
-    "SNR": "Signal-to-noise ratio: the echo's peak power over the noise's standard deviation "
-    "σn, in one flash (linear mode). A pixel needs an SNR above about the TNR to be detected. "
-    "Geiger mode: the count SNR S/√(S+B), the echo's expected counts S in the peak window over "
-    "the square root of those plus the background's B, over the frame's pulses.",
+    "TNR means fewer false alarms and more missed echoes.",
+    "SNR": "Signal-to-noise ratio:",
     "P_d": "Probability of detection: the chance that a pixel's echo crosses the threshold in "
     "this flash. An echo with P_d 0.90 is still missed one flash in ten, by chance (the noise "
     "pulled it under the threshold); the seed decides which.",
     "FWHM": "Full width at half maximum: a pulse's duration between the two times it is at half "
     "of its peak power.",
-    "CFD": "Constant-fraction discriminator: times an echo where it reaches a fixed fraction of "
-    "its own peak (a delayed copy minus a scaled copy crosses zero), so the time does not move "
-    "with the echo's strength.",
-    "Half-maximum time": "The time at which the echo first reaches half of its peak (◆ on the "
-    "chart): the linear-mode range is c t / 2 from it.",
-    "Pile-up": "Geiger mode: after an avalanche a pixel is dead for the dead time, so with "
-    "several photons per pulse only the earliest are counted; the histogram leans to the "
-    "echo's onset and the range comes out short.",
-    "Dead time": "Geiger mode: the time after an avalanche during which a pixel cannot fire "
-    "again (it is re-armed at each gate).",
-    "Dark count": "Geiger mode: an avalanche with no photon (thermal or tunnelling), at the dark "
-    "count rate; it looks like a background photon.",
-    "PDE": "Photon detection efficiency: the share of the photons reaching a Geiger-mode pixel "
-    "that set off an avalanche.",
-    "Pulses per frame": "Geiger mode: a frame sums the counts of this many laser pulses into "
-    "each pixel's histogram; more pulses, more counts and a longer frame.",
-    "Transmit attenuation": "Geiger mode: the pulse energy is cut by this many decibels (10 dB: "
-    "a tenth) so that the pixels see under one photoelectron per pulse and do not pile up.",
     "Outlier": "A false alarm: a point from noise crossing the threshold where there is no echo "
     "(red in the point cloud).",
     "Range": "The distance along a pixel's line of sight, c t / 2 from the echo's time t since "
@@ -56,8 +35,7 @@ _SHARED_GLOSSARY: dict[str, str] = {
     "Pixel": "One detector element of the square array: it sees a small cone of the field of "
     "view and gives at most one point (a mixed pixel sees two surfaces).",
     "Pulse energy": "The laser energy of one flash: the received power and the SNR scale with it.",
-    "Background light": "Sunlight scattered by the target and the Earth into the receiver: its "
-    "shot noise adds to the noise (linear mode), its photons to the counts (Geiger mode).",
+    "Background light": "Sunlight scattered by the target and the Earth into the receiver:",
     "Filter width": "The band-pass filter in front of the detector: a narrower filter lets in "
     "less background light.",
     "Seed": "The number the random draws start from: the same seed gives the same noise, the "
@@ -86,8 +64,8 @@ _SHARED_TERMS: dict[str, tuple[str, ...]] = {
 
 
 class _Merged(Mapping[str, Any]):
-    """A dict of the page's own entries and those the registered receivers declare (read at
-    each use: a receiver registered before the app starts is in)."""
+    """A dict of the page's own entries and those the known receivers declare (read at each
+    use: a receiver registered before the app starts is in)."""
 
     def __init__(self, build: Callable[[], dict[str, Any]]):
         self._build = build
@@ -102,13 +80,21 @@ class _Merged(Mapping[str, Any]):
         return len(self._build())
 
 
-# term -> its explanation: the page's, then the receivers' declarations' (their glossary)
-GLOSSARY: Mapping[str, str] = _Merged(
-    lambda: {
-        **_SHARED_GLOSSARY,
-        **{term: text for r in receivers.receivers() for term, text in r.glossary},
-    }
-)
+def merged_glossary() -> dict[str, str]:
+    """Term -> its explanation: the page's general entries, then each known receiver's (its
+    declaration's ``glossary``, in the registry's order). A term new to the glossary is a new
+    entry; a term already there gets the receiver's text after the entry's, one space between:
+    the receiver's half of a shared word ("SNR": the page's lead, the linear mode's meaning,
+    then the Geiger mode's)."""
+    merged = dict(_GENERAL_GLOSSARY)
+    for receiver in receivers.receivers():
+        for term, text in receiver.glossary:
+            merged[term] = f"{merged[term]} {text}" if term in merged else text
+    return merged
+
+
+# term -> its explanation (:func:`merged_glossary`)
+GLOSSARY: Mapping[str, str] = _Merged(merged_glossary)
 # control -> its terms: the page's, then the receivers' controls' (the terms they name)
 CONTROL_TERMS: Mapping[str, tuple[str, ...]] = _Merged(
     lambda: {

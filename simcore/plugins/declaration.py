@@ -8,8 +8,8 @@ the rest of the simulator needs to know about it.
 - its two stages, the receiver and the detection step (``respond``, ``detect``) and the scene
   values each reads (``response_reads``, ``detection_reads``: the stages' cache keys);
 - the summary figures and the per-point attributes it adds (:class:`Figure`, :class:`Attribute`);
-- what the app shows of it: its controls (:class:`Control`), its stats rows (:class:`StatsRow`)
-  and the series it adds to the pixel chart (:class:`Series`).
+- what the app shows of it: its controls (:class:`Control`), its stats rows (:class:`StatsRow`),
+  the series it adds to the pixel chart (:class:`Series`) and its glossary entries.
 
 A step may be given as a function or, so that declaring a receiver loads none of its physics, as
 ``"package.module:function"``, imported on first use. This module loads nothing but the standard
@@ -132,7 +132,9 @@ class Receiver:
     label : its name in the app's receiver choice ("Geiger mode")
     short : a short name for the app's CSS classes (``receiver-gm``, ``gm-controls``)
     hint : the app's caption under its controls
-    glossary : (term, explanation) pairs the app's glossary adds
+    glossary : (term, explanation) pairs the app's glossary adds: a new term is a new entry; a
+        term already there (the page's, an earlier receiver's) gets the text after its own, one
+        space between (the receiver's half of a shared word: Geiger mode's SNR)
     description : the app's stats row "Receiver", formatted as a :class:`StatsRow`'s text
         ("Geiger-mode array, {scene[gm][pulses]} pulses")
     section : its own scene table, or None (it reads only the shared sections)

@@ -4,12 +4,16 @@ legend and in the stats."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from support.app_helpers import change, small_app, stat
+from support.ideal_receiver import IDEAL, KIND
 
 from app.state import SPECS
 from app.ui.glossary import CONTROL_TERMS, GLOSSARY
+from simcore import receivers
 
 
 def test_every_control_has_glossary_entries_and_the_lessons_words_are_there():
@@ -18,6 +22,26 @@ def test_every_control_has_glossary_entries_and_the_lessons_words_are_there():
     for word in ("TNR", "SNR", "P_d", "FWHM", "CFD", "Pile-up", "Dead time", "PDE"):
         assert GLOSSARY[word]
     assert CONTROL_TERMS["tnr"][0] == "TNR"
+
+
+def test_each_receiver_declares_its_words_and_its_half_of_a_shared_one():
+    # the Geiger-mode words are gm_apd's; SNR reads the page's lead, then linear, then Geiger mode
+    gm_words = dict(receivers.get("gm_apd").glossary)
+    assert GLOSSARY["Pile-up"] == gm_words["Pile-up"]
+    assert GLOSSARY["SNR"] == " ".join(
+        ("Signal-to-noise ratio:", dict(receivers.get("lm_apd").glossary)["SNR"], gm_words["SNR"])
+    )
+    ideal = dataclasses.replace(
+        IDEAL, glossary=(("Ideal threshold", "A fixed power."), ("SNR", "Ideal: the margin."))
+    )
+    receivers.register(ideal)
+    try:
+        assert GLOSSARY["Ideal threshold"] == "A fixed power."  # a new entry, after the others
+        assert list(GLOSSARY)[-1] == "Ideal threshold"
+        assert GLOSSARY["SNR"].endswith(f"{gm_words['SNR']} Ideal: the margin.")  # its half
+    finally:
+        receivers.unregister(KIND)
+    assert "Ideal threshold" not in GLOSSARY
 
 
 @pytest.fixture(scope="module")

@@ -69,6 +69,48 @@ RECEIVER = Receiver(
     label="Geiger mode",
     short="gm",
     description="Geiger-mode array, {scene[gm][pulses]} pulses",
+    # the app's glossary: its own words, and its halves of the shared ones (after the page's)
+    glossary=(
+        ("TNR", "In Geiger mode it sets the count threshold's false-alarm rate."),
+        (
+            "SNR",
+            "Geiger mode: the count SNR S/√(S+B), the echo's expected counts S in the peak "
+            "window over the square root of those plus the background's B, over the frame's "
+            "pulses.",
+        ),
+        (
+            "Pile-up",
+            "Geiger mode: after an avalanche a pixel is dead for the dead time, so with several "
+            "photons per pulse only the earliest are counted; the histogram leans to the echo's "
+            "onset and the range comes out short.",
+        ),
+        (
+            "Dead time",
+            "Geiger mode: the time after an avalanche during which a pixel cannot fire again "
+            "(it is re-armed at each gate).",
+        ),
+        (
+            "Dark count",
+            "Geiger mode: an avalanche with no photon (thermal or tunnelling), at the dark count "
+            "rate; it looks like a background photon.",
+        ),
+        (
+            "PDE",
+            "Photon detection efficiency: the share of the photons reaching a Geiger-mode pixel "
+            "that set off an avalanche.",
+        ),
+        (
+            "Pulses per frame",
+            "Geiger mode: a frame sums the counts of this many laser pulses into each pixel's "
+            "histogram; more pulses, more counts and a longer frame.",
+        ),
+        (
+            "Transmit attenuation",
+            "Geiger mode: the pulse energy is cut by this many decibels (10 dB: a tenth) so that "
+            "the pixels see under one photoelectron per pulse and do not pile up.",
+        ),
+        ("Background light", "its photons to the counts (Geiger mode)."),
+    ),
     hint="Each pixel counts single photons over the pulses (dead time re-armed at each gate); "
     "click a pixel to see its histogram against the counts expected without dead time. "
     "TNR sets the count threshold's false-alarm rate. The transmit attenuation keeps the "

@@ -35,6 +35,27 @@ RECEIVER = Receiver(
     label="Linear mode",
     short="lm",
     description="linear-mode APD array",
+    # the app's glossary: its own words (its timing), and its halves of the shared ones (after
+    # the page's lead, before the other receivers')
+    glossary=(
+        (
+            "SNR",
+            "the echo's peak power over the noise's standard deviation σn, in one flash (linear "
+            "mode). A pixel needs an SNR above about the TNR to be detected.",
+        ),
+        (
+            "CFD",
+            "Constant-fraction discriminator: times an echo where it reaches a fixed fraction of "
+            "its own peak (a delayed copy minus a scaled copy crosses zero), so the time does not "
+            "move with the echo's strength.",
+        ),
+        (
+            "Half-maximum time",
+            "The time at which the echo first reaches half of its peak (◆ on the chart): the "
+            "linear-mode range is c t / 2 from it.",
+        ),
+        ("Background light", "its shot noise adds to the noise (linear mode),"),
+    ),
     chart="waveform",
     chart_title="Echo waveforms of the selected pixels",
     chart_series=(

@@ -32,9 +32,11 @@ def _limited_stops(pixel, range_m, max_stops, holdoff_m, n_pixels, accepted):
         lo, hi = start[p], start[p + 1]
         if hi == lo:
             continue
-        events = order[lo:hi].copy()  # in input order; now by range, ties in input order
+        # the pixel's events in input order, sorted in place by range (ties in input order): no
+        # array made per pixel (their allocations took 0.6 of a 256 x 256 frame's 0.86 ms)
+        events = order[lo:hi]
         if hi - lo > _SORT_IN_PLACE:
-            events = events[np.argsort(range_m[events], kind="mergesort")]
+            events[:] = events[np.argsort(range_m[events], kind="mergesort")]
         else:
             for a in range(1, hi - lo):
                 e = events[a]

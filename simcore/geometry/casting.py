@@ -131,6 +131,11 @@ class RayCaster:
             range_m=range_m, face=face, directions_t=dirs_t, cos_theta=cos_t, depth_m=depth
         )
 
+    def embree_hits(self, starts, directions) -> dict:
+        """Embree's own first-hit query on float32 rays ((n, 3) each, target frame), nothing
+        around it: the floor the benchmark sets :meth:`first_hits` against."""
+        return self._scene.run(starts, directions, output=1)
+
     def occluded(self, origins_t, direction_t) -> np.ndarray:
         """(n,) bool: a ray from each of ``origins_t`` ((n, 3) float64, target frame [m]) along
         the one unit ``direction_t`` ((3,) target frame) meets the mesh (shadow rays toward the

@@ -1,6 +1,8 @@
 """`lmapd bench`'s thread scaling: the thread counts it compares, its table, and one small run
 (figures printed by the bench, never asserted here)."""
 
+import numpy as np
+
 from simcore import parallel
 from simcore.cli.bench import stages as bench
 from simcore.pipeline import Pipeline
@@ -27,9 +29,26 @@ def test_a_scaling_run_times_each_thread_count_and_its_ray_cast():
     for r in rows:
         assert 0 < r["frame_s"]["min"] <= r["frame_s"]["median"] <= r["frame_s"]["max"]
         assert r["ray_cast_s"]["median"] > 0 and r["rays_per_s_per_core"] > 0
+        assert r["first_hits_s"]["median"] > 0 and r["raw_embree_s"]["median"] > 0
+        assert r["first_hits_over_raw"]["min"] > 0
     assert rows[0]["speedup"] == {"median": 1.0, "min": 1.0, "max": 1.0}
     text = "\n".join(bench.format_scaling([{"what": "8 x 8 x 4 frame", "rows": rows}]))
     assert "Scaling, 8 x 8 x 4 frame:" in text and "| 1 | " in text and "| 2 | " in text
+    assert "| first hits (ms) | raw Embree (ms) | first hits / raw |" in text
+
+
+def test_raw_embree_sees_the_rays_first_hits_casts():
+    from simcore import geometry
+
+    scene = with_overrides(load_scene(), {"pixels": 16, "fidelity.subrays": 4})
+    caster = geometry.RayCaster(load_target(scene.target))
+    rays = bench.cast_inputs(caster, geometry.stage_rays(scene), scene)
+    range_m, face = caster.first_hits(rays.origin_t, rays.directions_t, rays.start_m)
+    raw = caster.embree_hits(rays.starts32, rays.directions32)
+    assert (face >= 0).any()
+    assert np.array_equal(np.asarray(raw["primID"]), face)
+    hit = face >= 0
+    assert np.array_equal(rays.start_m + raw["tfar"][hit].astype(np.float64), range_m[hit])
 
 
 def test_the_table_gives_the_threads_and_each_ray_casts_rays_per_second_per_core():

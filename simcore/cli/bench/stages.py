@@ -13,7 +13,10 @@ core of each ray cast). The scaling table then takes the 256 x 256 x 4 frame (an
 without ``--quick``) and the waveform Monte Carlo of 128 x 128 pixels over a 1 km gate (the
 detection stage of ``fidelity.noise_model = "montecarlo"``) at 1, 2, 4, ... threads up to the
 cores this process may use, the thread counts in turn within each round, so that a busy spell
-slows them alike; the speed-up against one thread is taken round by round.
+slows them alike; the speed-up against one thread is taken round by round. Each frame's round
+also times :meth:`simcore.geometry.RayCaster.first_hits` on the frame's rays in the target frame
+and Embree alone on the same rays (made float32 beforehand, one equal chunk per thread): the
+ratio first hits / raw Embree is the caster's cost over Embree's own at each thread count.
 """
 
 from __future__ import annotations
@@ -25,7 +28,9 @@ import statistics
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 
+import numpy as np
 from tqdm import tqdm
 
 from ... import geometry, parallel
@@ -77,6 +82,51 @@ def ray_cast_s(caster: geometry.RayCaster, rays, scene) -> float:
         return time.perf_counter() - t0
 
 
+@dataclass(frozen=True)
+class CastInputs:
+    """The rays of a frame as :meth:`RayCaster.first_hits` takes them (target frame, float64) and
+    as Embree itself takes them (float32 start points at the tracing start, and directions)."""
+
+    origin_t: np.ndarray
+    directions_t: np.ndarray
+    start_m: float
+    starts32: np.ndarray
+    directions32: np.ndarray
+
+
+def cast_inputs(caster: geometry.RayCaster, rays, scene) -> CastInputs:
+    """The sub-rays of ``rays`` (a RayGrid) for the target in the scene's pose."""
+    model = caster.model
+    pose = geometry.target_pose(scene.pose, model.extents_m, model.body_from_mesh)
+    dirs_s = rays.directions.reshape(-1, 3)
+    dirs_t = dirs_s @ pose.rotation
+    origin_t = -pose.rotation.T @ pose.translation_m
+    start = max(0.0, float(np.linalg.norm(pose.translation_m)) - 1.05 * model.radius_m)
+    starts = np.ascontiguousarray((origin_t[None, :] + start * dirs_t).astype(np.float32))
+    return CastInputs(origin_t, dirs_t, start, starts, np.ascontiguousarray(dirs_t, np.float32))
+
+
+def first_hits_s(caster: geometry.RayCaster, rays: CastInputs) -> float:
+    """Wall time [s] of :meth:`RayCaster.first_hits` on target-frame rays (the caster's own
+    work: float32 rays made per chunk, ranges and faces out), on the frame's threads."""
+    t0 = time.perf_counter()
+    caster.first_hits(rays.origin_t, rays.directions_t, rays.start_m)
+    return time.perf_counter() - t0
+
+
+def raw_embree_s(caster: geometry.RayCaster, rays: CastInputs) -> float:
+    """Wall time [s] of Embree alone on the same rays, made float32 beforehand: one equal chunk
+    per thread of the frame, each thread one query (the floor of :func:`first_hits_s`)."""
+    n = len(rays.starts32)
+    bounds = np.linspace(0, n, parallel.threads() + 1).astype(int)
+    chunks = [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+    t0 = time.perf_counter()
+    parallel.map_threads(
+        lambda part: caster.embree_hits(rays.starts32[part], rays.directions32[part]), chunks
+    )
+    return time.perf_counter() - t0
+
+
 def thread_counts(cores: int | None = None) -> list[int]:
     """1, 2, 4, ... up to ``cores`` (the cores this process may use), and ``cores`` itself."""
     cores = parallel.available_cores() if cores is None else max(1, int(cores))
@@ -92,11 +142,13 @@ def scaling(pipe: Pipeline, scene, counts, repeats: int, caster=None, stage: str
     """Time ``scene``'s frame (or one ``stage`` of it) at each thread count of ``counts``, the
     counts in turn within each of ``repeats`` rounds; three poses (pitch 0, 0.5, 1 deg) or, for
     a stage, three seeds in rotation, so that every run computes anew. With ``caster`` each frame
-    is followed by the ray cast alone of its sub-rays on the same threads.
+    is followed by the ray cast alone of its sub-rays on the same threads, then by
+    :meth:`RayCaster.first_hits` and by Embree alone on the same target-frame rays.
 
     Returns one row per count: threads, frame_s (or the stage's) and ray_cast_s (median, min,
-    max [s]), the speed-ups against the first count taken round by round, and the ray cast's
-    rays per second per core (per thread)."""
+    max [s]), the speed-ups against the first count taken round by round, the ray cast's rays
+    per second per core (per thread), first_hits_s and raw_embree_s (median, min, max [s]) and
+    first_hits_over_raw (their ratio, round by round)."""
     if stage is None:
         variants = [with_overrides(scene, pitch_deg=p) for p in (0.0, 0.5, 1.0)]
     else:
@@ -105,6 +157,9 @@ def scaling(pipe: Pipeline, scene, counts, repeats: int, caster=None, stage: str
     before = parallel.threads()
     frames: dict[int, list[float]] = {t: [] for t in counts}
     casts: dict[int, list[float]] = {t: [] for t in counts}
+    hits: dict[int, list[float]] = {t: [] for t in counts}
+    raws: dict[int, list[float]] = {t: [] for t in counts}
+    inputs = {}
     k = 1  # the first timed run takes the third variant: the last warm one was the second
     try:
         for t in counts:  # warm each thread count
@@ -121,6 +176,10 @@ def scaling(pipe: Pipeline, scene, counts, repeats: int, caster=None, stage: str
                 frames[t].append(sum(result.timings_s[s] for s in stages))
                 if caster is not None:
                     casts[t].append(ray_cast_s(caster, rays, variant))
+                    if variant.pose not in inputs:
+                        inputs[variant.pose] = cast_inputs(caster, rays, variant)
+                    hits[t].append(first_hits_s(caster, inputs[variant.pose]))
+                    raws[t].append(raw_embree_s(caster, inputs[variant.pose]))
     finally:
         parallel.set_threads(before)
     n_rays = len(rays.directions.reshape(-1, 3)) if rays is not None else 0
@@ -137,6 +196,11 @@ def scaling(pipe: Pipeline, scene, counts, repeats: int, caster=None, stage: str
                 a / b for a, b in zip(casts[counts[0]], casts[t], strict=True)
             )
             row["rays_per_s_per_core"] = n_rays / statistics.median(casts[t]) / t
+            row["first_hits_s"] = _spread(hits[t])
+            row["raw_embree_s"] = _spread(raws[t])
+            row["first_hits_over_raw"] = _spread(
+                a / b for a, b in zip(hits[t], raws[t], strict=True)
+            )
         rows.append(row)
     return rows
 
@@ -335,8 +399,8 @@ def format_scaling(tables: list[dict]) -> list[str]:
         if has_cast:
             lines += [
                 "| threads | frame (ms) | speed-up | ray cast alone (ms) | speed-up "
-                "| Mrays/s per core |",
-                "|---|---|---|---|---|---|",
+                "| Mrays/s per core | first hits (ms) | raw Embree (ms) | first hits / raw |",
+                "|---|---|---|---|---|---|---|---|---|",
             ]
         else:
             lines += ["| threads | time (ms) | speed-up |", "|---|---|---|"]
@@ -354,6 +418,15 @@ def format_scaling(tables: list[dict]) -> list[str]:
                     f"{c['median']:.2f} ({c['min']:.2f}-{c['max']:.2f})",
                     f"{r['rays_per_s_per_core'] / 1e6:.2f}",
                 ]
+                if "first_hits_over_raw" in r:
+                    q = r["first_hits_over_raw"]
+                    cells += [
+                        _ms(r["first_hits_s"]),
+                        _ms(r["raw_embree_s"]),
+                        f"{q['median']:.2f} ({q['min']:.2f}-{q['max']:.2f})",
+                    ]
+                else:
+                    cells += ["-", "-", "-"]
             lines.append("| " + " | ".join(cells) + " |")
     return lines
 

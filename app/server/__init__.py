@@ -6,9 +6,11 @@ checked against.
 ``launcher`` the sessions and the proxy in front of them; ``zygote`` the sessions' preloaded
 parent; ``process`` the serving processes (a session's token and address-space limit, the
 launcher's run, the exit status); ``addresses`` what the server prints and trame's options;
-``security`` the websocket door; ``connections`` the guarded listening sites (idle and
-partial connections, connections per address); ``sync`` the per-page state synchronisation that
-replaces trame's; ``versions`` the framework releases the patches were checked against, and the
-check made at start (standard library only: this package's ``__init__`` imports nothing, so that
-the check runs before any patch is loaded).
+``security`` the websocket door (``install``), by concern in ``door`` (the token, origins and
+connection cap), ``guard`` (the wslink hello and the calls a page may make), ``budget`` (the
+memory caps of chunked messages) and ``client_values`` (what a page may write); ``connections``
+the guarded listening sites (idle and partial connections, connections per address); ``sync``
+the per-page state synchronisation that replaces trame's; ``versions`` the framework releases
+the patches were checked against, and the check made at start (standard library only: this
+package's ``__init__`` imports nothing, so that the check runs before any patch is loaded).
 """

@@ -4,9 +4,9 @@ proxy's addresses, and trame's own command-line options."""
 
 from __future__ import annotations
 
-from app.server import security
+from app.server import door
 
-LOOPBACK_HOSTS = security.LOOPBACK_NAMES
+LOOPBACK_HOSTS = door.LOOPBACK_NAMES
 
 
 def trame_arguments(host: str, port: int, token: str) -> list[str]:
@@ -26,7 +26,7 @@ def lan_addresses(host: str) -> list[str]:
     """The addresses other machines can open when the server listens on every interface (``host``
     0.0.0.0 or ::): this machine's IPv4 addresses (and global IPv6 ones for ::), loopback and
     link-local ones left out."""
-    if host not in security.WILDCARD_HOSTS:
+    if host not in door.WILDCARD_HOSTS:
         return []
     import ipaddress  # noqa: PLC0415  (only on a wildcard host)
     import socket  # noqa: PLC0415
@@ -56,7 +56,7 @@ def start_message(host: str, port: int, token: str, lan: list[str] | None = None
     wildcard host (0.0.0.0) the first address is this machine's loopback one, then one line for
     each of its LAN addresses (``lan``: found by :func:`lan_addresses` if None), which are what
     other machines open."""
-    if host in security.WILDCARD_HOSTS:
+    if host in door.WILDCARD_HOSTS:
         lan = lan_addresses(host) if lan is None else lan
         lines = [f"lmapd-sim app: {app_address('127.0.0.1', port, token)}  (Ctrl+C stops it)"]
         lines += [f"lmapd-sim app: on the network: {app_address(ip, port, token)}" for ip in lan]
@@ -77,7 +77,7 @@ def public_lines(origins: tuple[str, ...], token: str) -> list[str]:
     """The addresses a reverse proxy serves the app at, each with the token, to print."""
     lines = []
     for url in origins:
-        origin = security.normal_origin(url)
+        origin = door.normal_origin(url)
         if origin is None:
             lines.append(f"lmapd-sim app: warning: --public-url {url!r} is no http(s) address")
             continue

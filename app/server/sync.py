@@ -57,7 +57,7 @@ class ClientStateSync:
         self.state = state
         self.screens = dict(screens)
         self.protocol = None
-        self.clients: Callable[[], list[str]] = list  # set by app.server.security.Guard
+        self.clients: Callable[[], list[str]] = list  # set by app.server.guard.Guard
         # sends one page a push at once (set by the Guard, see Guard.send_state); else wslink's
         # publish, which sends it on a later turn of the event loop
         self.send: Callable[[str, dict], None] | None = None

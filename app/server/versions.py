@@ -1,11 +1,11 @@
 """The framework versions the app's patches were checked against, and the check made at start.
 
-``app.server.security`` and ``app.server.sync`` hook into private parts of trame-server and wslink
-(the protocol instance's state push, wslink's chunk header and handler methods). Those change
-without notice between releases, so the app runs only with the releases it was checked against:
-pyproject.toml declares the same ranges, and :func:`check_framework_versions` refuses, with one
-message naming the package, its version and the range, before any of the app is imported. Standard
-library only.
+``app.server.security`` (its ``guard``, ``budget`` and ``door``) and ``app.server.sync`` hook into
+private parts of trame-server and wslink (the protocol instance's state push, wslink's chunk header
+and handler methods). Those change without notice between releases, so the app runs only with the
+releases it was checked against: pyproject.toml declares the same ranges, and
+:func:`check_framework_versions` refuses, with one message naming the package, its version and the
+range, before any of the app is imported. Standard library only.
 """
 
 from __future__ import annotations

@@ -239,7 +239,7 @@ def echo_features(
     buckets = 2 ** np.ceil(np.log2(np.maximum(np.arange(k_max + 1), 1))).astype(np.int64)
     begin = np.array([window_begin_s(shape, int(k), dt_s) for k in buckets])
     if kernel is not None:
-        kernel.set_threads(1 if len(arrivals) < SERIAL_BELOW_PIXELS else parallel.threads())
+        kernel.set_threads(parallel.threads_for(len(arrivals), SERIAL_BELOW_PIXELS))
         out = kernel.echo_features(
             shape, arrivals, weights, dt_s, cfd_delay_s, cfd_fraction, raw_peak, begin,
             (HALF_STEPS, CFD_STEPS),

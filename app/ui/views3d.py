@@ -1,12 +1,15 @@
 """The two 3D views, rendered client-side by vtk.js (no server-side OpenGL): the scene (target mesh
 coloured by material where seen, grey where hidden, the field-of-view frustum, arrows towards the
-Sun and the Earth when there is a Sun, a legend) and the point cloud (coloured by range, SNR or
-outlier flag; outliers always red and larger).
+Sun and the Earth when there is a Sun, a legend; "Show lit side" then colours the facets that face
+the Sun and those that face the Earth instead of the materials) and the point cloud (coloured by
+range, SNR or outlier flag; outliers always red and larger).
 
 Data arrive as binary typed arrays in the trame state (``app/static/binary.js`` makes vtk.js's typed
 arrays of them: ``trame.utils.lmapdBin``). The whole mesh is sent once and drawn grey; the facets
 seen are drawn over it in their material colours (a small mesh of their own: a few thousand facets,
-their corners and colours), sent only when the set of facets seen changes. Each view's camera reset
+their corners and colours), sent only when the set of facets seen changes. The lit side is the
+whole mesh again, with the points the page holds and one colour a facet, which the page makes of
+two bits a facet (``app/static/lit.js``: ``trame.utils.lmapdLit``). Each view's camera reset
 (the button, or the 'r' key) goes to the home camera held in the state.
 """
 
@@ -60,15 +63,42 @@ def _card_title(text: str, ref: str) -> None:
         _reset_button(ref)
 
 
+# the lit side is drawn (instead of the grey target and the seen facets' materials): the page's
+# toggle is on and the frame has a Sun (and the lit side is of the mesh the page holds)
+LIT_SHOWN = "trame.utils.lmapdLit.shown(show_lit_side, lit_side, target_polys)"
+
+
+def _lit_switch() -> None:
+    """The scene's "Show lit side" switch, there only with a Sun (``lit_side`` set). The toggle
+    is each page's own (client-only state: nothing goes to the server)."""
+    v3.VSwitch(
+        v_if=("lit_side", None),
+        v_model=("show_lit_side", False),
+        label="Show lit side",
+        density="compact",
+        hide_details=True,
+        color="amber",
+        classes="lit-switch flex-grow-0 mr-2",
+        style="white-space: nowrap",  # on a phone the switch goes below the title, its label whole
+        title="Colour the facets that face the Sun and those that face the Earth",
+    )
+
+
 def scene_card() -> None:
-    """Target mesh, frustum, material legend and the model credit."""
-    with v3.VCard(classes="view-card scene-card", elevation=1):
-        _card_title("3D scene: target and field of view", "scene_view")
+    """Target mesh, frustum, material legend, the lit side and the model credit."""
+    with v3.VCard(classes="view-card scene-card", elevation=1) as card:
+        card.server.state.client_only("show_lit_side")
+        with v3.VCardTitle(classes="card-title d-flex align-center flex-wrap"):
+            html.Span("3D scene: target and field of view")
+            v3.VSpacer()
+            _lit_switch()
+            _reset_button("scene_view")
         with html.Div(classes="vtk-box scene-box"):
             with _view("scene_view", "scene_camera || home_camera"):
                 with vtkw.VtkGeometryRepresentation(
                     id="target",
                     property=(f"{{ color: {HIDDEN_RGB}, ambient: 0.3, diffuse: 0.7 }}",),
+                    actor=(f"{{ visibility: !{LIT_SHOWN} }}",),
                 ):
                     vtkw.VtkPolyData(
                         "target", points=(_bin("target_points"),), polys=(_bin("target_polys"),)
@@ -77,9 +107,26 @@ def scene_card() -> None:
                     id="seen",
                     property=("{ ambient: 0.3, diffuse: 0.75, specular: 0.05 }",),
                     mapper=("{ colorMode: 2, scalarMode: 2 }",),  # direct RGB, per facet
-                    actor=("{ visibility: !!seen_facets }",),
+                    actor=(f"{{ visibility: !!seen_facets && !{LIT_SHOWN} }}",),
                 ):
                     vtkw.VtkMesh("seen_facets", state=(_bin("seen_facets"),))
+                with vtkw.VtkGeometryRepresentation(  # the lit side: the whole mesh, per facet
+                    id="lit",
+                    property=("{ ambient: 0.35, diffuse: 0.65 }",),
+                    mapper=("{ colorMode: 2, scalarMode: 2 }",),
+                    actor=(f"{{ visibility: {LIT_SHOWN} }}",),
+                ):
+                    with vtkw.VtkPolyData(
+                        "lit", points=(_bin("target_points"),), polys=(_bin("target_polys"),)
+                    ):
+                        with vtkw.VtkCellData():
+                            vtkw.VtkDataArray(
+                                registration="setScalars",
+                                name="lit",
+                                type="Uint8Array",
+                                number_of_components=(3,),  # a number, not "3"
+                                values=("trame.utils.lmapdLit.colors(lit_side)",),
+                            )
                 with vtkw.VtkGeometryRepresentation(
                     id="highlight",
                     property=("{ color: [1.0, 0.86, 0.1], ambient: 0.5, diffuse: 0.6 }",),
@@ -109,15 +156,23 @@ def scene_card() -> None:
 
 def _material_legend() -> None:
     with html.Div(classes="overlay legend-overlay"):
-        with html.Div(classes="legend-row legend-head"):
-            html.Span("material (facets seen / all)")
-        with html.Div(v_for="m in legend", key="m.name", classes="legend-row"):
-            html.Span(classes="swatch", style=("{ background: m.color }",))
-            html.Span("{{ m.label }}", classes="legend-label")
-            html.Span(
-                "{{ m.seen.toLocaleString() }} / {{ m.total.toLocaleString() }}",
-                classes="legend-count",
-            )
+        with html.Div(v_if=f"!{LIT_SHOWN}"):
+            with html.Div(classes="legend-row legend-head"):
+                html.Span("material (facets seen / all)")
+            with html.Div(v_for="m in legend", key="m.name", classes="legend-row"):
+                html.Span(classes="swatch", style=("{ background: m.color }",))
+                html.Span("{{ m.label }}", classes="legend-label")
+                html.Span(
+                    "{{ m.seen.toLocaleString() }} / {{ m.total.toLocaleString() }}",
+                    classes="legend-count",
+                )
+        with html.Div(v_else=True, classes="lit-legend"):
+            with html.Div(classes="legend-row legend-head"):
+                html.Span("lit side (facets, by their normals)")
+            with html.Div(v_for="r in lit_side.rows", key="r.label", classes="legend-row lit-row"):
+                html.Span(classes="swatch", style=("{ background: r.color }",))
+                html.Span("{{ r.label }}", classes="legend-label")
+                html.Span("{{ r.facets.toLocaleString() }}", classes="legend-count")
         with html.Div(v_if="highlight_part", classes="legend-row highlight-row"):
             html.Span(classes="swatch", style="background: #ffdb1a")
             html.Span("part {{ highlight_part }} (materials panel)", classes="legend-label")

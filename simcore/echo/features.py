@@ -233,11 +233,7 @@ def echo_features(
     kernel = compiled_kernel() if backend != "numpy" else None
     if backend == "kernel" and kernel is None:
         raise RuntimeError(f"the compiled echo kernel is unavailable: {_NO_KERNEL[0]}")
-    k_max = arrivals.shape[1]
-    # the window's start by element count, rounded up to a power of two as the numpy path grouped
-    # pixels before the kernel (so the samples fall where they fell)
-    buckets = 2 ** np.ceil(np.log2(np.maximum(np.arange(k_max + 1), 1))).astype(np.int64)
-    begin = np.array([window_begin_s(shape, int(k), dt_s) for k in buckets])
+    begin = window_begins_s(shape, arrivals.shape[1], dt_s)
     if kernel is not None:
         kernel.set_threads(parallel.threads_for(len(arrivals), SERIAL_BELOW_PIXELS))
         out = kernel.echo_features(
@@ -286,6 +282,26 @@ def sample_echoes(shape: PulseShape, table: np.ndarray, arrivals_s, weights, t0_
         tau = (t0[sl, None] + offsets[None, :])[:, :, None] - arrivals[sl, None, :]
         out[sl] = np.einsum("nlk,nk->nl", shape.lookup(table, tau), weights[sl])
     return out
+
+
+_BEGINS: dict[tuple[int, int, float], tuple[PulseShape, np.ndarray]] = {}
+
+
+def window_begins_s(shape: PulseShape, k_max: int, dt_s: float) -> np.ndarray:
+    """(k_max + 1,) :func:`window_begin_s` by element count, each count rounded up to a power of
+    two as the numpy path grouped pixels before the kernel (so the samples fall where they fell).
+    Kept per pulse, count and step: each mark reads the whole pulse table, and a frame's five took
+    0.3 ms on the calling thread alone (while the other threads waited)."""
+    key = (id(shape), int(k_max), float(dt_s))
+    hit = _BEGINS.get(key)
+    if hit is not None and hit[0] is shape:
+        return hit[1].copy()  # (writable, as the compiled kernel's signature has it)
+    buckets = 2 ** np.ceil(np.log2(np.maximum(np.arange(k_max + 1), 1))).astype(np.int64)
+    begin = np.array([window_begin_s(shape, int(k), dt_s) for k in buckets])
+    if len(_BEGINS) >= 64:  # a few pulses and element counts in use at a time
+        _BEGINS.clear()
+    _BEGINS[key] = (shape, begin)
+    return begin.copy()
 
 
 def window_begin_s(shape: PulseShape, n_elements: int, dt_s: float) -> float:

@@ -121,6 +121,15 @@ def stage_echo(scene: Scene, tgt: geometry.TargetStage, hits: geometry.Hits) -> 
     )
 
 
+def any_per_row(mask: np.ndarray) -> np.ndarray:
+    """(n,) bool: each row of ``mask`` ((n, K) bool) has a True; ``mask.any(axis=1)``, by one
+    pass per column (numpy's reduction along a short axis took 1.3 ms for 65,536 rows of 4)."""
+    out = mask[:, 0].copy() if mask.shape[1] else np.zeros(len(mask), bool)
+    for k in range(1, mask.shape[1]):
+        out |= mask[:, k]
+    return out
+
+
 # Lit pixels per chunk of the element work below which a block's elements are made on the calling
 # thread alone (the numpy passes of a few thousand pixels take well under a millisecond)
 ELEMENT_CHUNK_PIXELS = 4096
@@ -132,7 +141,7 @@ def _echo_block(
     """Echo features of one block of pixels sampled with the same number of sub-rays: the
     elements of chunks of its lit pixels on the frame's threads (numpy releases the GIL over
     these arrays; each pixel's figures do not depend on the chunks), then the features of all."""
-    rows = np.flatnonzero((block.face >= 0).any(axis=1))  # pixels that see the target
+    rows = np.flatnonzero(any_per_row(block.face >= 0))  # pixels that see the target
     parts = min(parallel.threads(), len(rows) // ELEMENT_CHUNK_PIXELS) or 1
     bounds = np.linspace(0, len(rows), parts + 1).astype(int)
     face_material = model.face_material_library  # (a property computed on each use)
@@ -201,7 +210,7 @@ def _elements(scene, face_material, block: geometry.HitBlock, rows, shape) -> di
         subrays=block.subrays,
         paper_4pi=scene.uses("eq30_4pi"),
     )
-    keep = (weights > 0).any(axis=1)
+    keep = any_per_row(weights > 0)
     weights, face, mat, rows = weights[keep], face[keep], mat[keep], rows[keep]
     if scene.uses("eq29_one_way"):  # relief along the boresight, one way (the paper's print)
         distance = scene.pose.distance_m

@@ -70,3 +70,9 @@ def test_hits_echoes_and_clouds_do_not_depend_on_the_chunks(case, monkeypatch):
     for name, values in one.items():
         assert many[name].shape == values.shape, name
         assert np.array_equal(many[name], values, equal_nan=True), name
+
+
+@pytest.mark.parametrize("shape", [(4096, 4), (300, 64), (5, 1), (0, 4), (7, 0)])
+def test_any_per_row_is_numpys_any_along_rows(shape):
+    mask = np.random.default_rng(1).random(shape) < 0.1
+    assert np.array_equal(echo_stage.any_per_row(mask), mask.any(axis=1))

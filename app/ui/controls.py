@@ -336,10 +336,12 @@ def sunlight() -> None:
             ("Orbit", "orbit", "sun-orbit"),
         ],
     )
-    with html.Div(v_show="sun_mode === 'manual'", classes="sun-manual-controls"):
+    # a choice's own controls are rendered only while it is chosen (v-if, not v-show): a new
+    # page builds only the sliders it shows
+    with html.Div(v_if="sun_mode === 'manual'", classes="sun-manual-controls"):
         slider("sun_azimuth_deg")
         slider("sun_elevation_deg")
-    with html.Div(v_show="sun_mode !== 'none'", classes="sun-filter-controls"):
+    with html.Div(v_if="sun_mode !== 'none'", classes="sun-filter-controls"):
         slider("filter_width_nm")
         html.Div(
             "Orbit: the Sun from the JPL DE421 ephemeris at the scene's epoch and, in fly-around "
@@ -363,7 +365,7 @@ def receiver_choice() -> None:
         if not r.controls:
             continue
         with html.Div(
-            v_show=f"receiver_kind === '{r.kind}'", classes=f"{r.short or r.kind}-controls"
+            v_if=f"receiver_kind === '{r.kind}'", classes=f"{r.short or r.kind}-controls"
         ):
             for control in r.controls:
                 slider(control.name)

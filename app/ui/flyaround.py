@@ -31,8 +31,9 @@ def mode_switch() -> None:
 
 
 def flyaround_panel() -> None:
-    """Shown in fly-around mode only."""
-    with html.Div(v_show="mode === 'flyaround'", classes="flyaround-panel"):
+    """Shown in fly-around mode only (rendered only then: v-if, as the drawer's other panels of
+    one choice, so a new page does not build its sliders and orbit chart hidden)."""
+    with html.Div(v_if="mode === 'flyaround'", classes="flyaround-panel"):
         html.Div("Fly-around (one orbit)", classes="section-title text-overline")
         with html.Div(
             classes="control control-fly_t_s", **a11y_attributes("Time since the epoch", "s")

@@ -7,7 +7,7 @@ from trame.ui.vuetify3 import VAppLayout
 from trame.widgets import client, html
 from trame.widgets import vuetify3 as v3
 
-from app.ui import controls, design, glossary, lessons, panels, static, views3d
+from app.ui import charts, controls, design, glossary, lessons, panels, static, views3d
 from app.ui.widgets import html_attributes
 
 # After the page applied a frame, the frame-pacing helper (app/static/frame.js) waits until it is
@@ -145,5 +145,6 @@ def build_layout(server) -> VAppLayout:
         with v3.VMain():
             views_grid()
     layout.title = "lmapd-sim"
+    charts.defer_plotly(server)  # plotly's bundle after the first frame (app/static/charts.js)
     static.enable(server)  # last: the page's styles after the widget libraries' ones
     return layout

@@ -25,6 +25,7 @@ SCRIPTS = (
     "cursor.js",  # the waveform chart's measuring cursor: trame.utils.lmapdCursor (app.ui.panels)
     "keyboard.js",  # log sliders' keys, the array image's cursor pixel, Copy link's answer
     "lesson.js",  # an opened lesson brings its view into sight: trame.utils.lmapdLesson
+    "charts.js",  # the charts' library after the first frame: trame.utils.lmapdCharts (charts)
     "lit.js",  # the 3D scene's lit side, the facets' colours: trame.utils.lmapdLit (views3d)
 )
 STYLES = ("page.css", "markers.css", "glossary.css", "lessons.css")

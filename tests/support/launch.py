@@ -176,12 +176,14 @@ def wait_first_frame(page, timeout_s: float = 90.0) -> None:
 def wait_settled(page, timeout_s: float = 60.0) -> None:
     """Wait until the page has sent every change (trame's client holds a changed value until its
     previous call is answered: under load the last slider step can still be waiting), nothing is
-    computing and the newest frame is drawn."""
+    computing, the newest frame is drawn and the charts are mounted (their library loads after
+    the first frame: app/static/charts.js)."""
     page.wait_for_function(
         """() => {
             const s = window.trame.state, frames = window.lmapdFrames || [];
             return s.dirtyKeys.size === 0 && !s.client.isBusy() && !s.get('busy')
-                && frames.length > 0 && frames[frames.length - 1].key === s.get('frame_key');
+                && frames.length > 0 && frames[frames.length - 1].key === s.get('frame_key')
+                && !!(window.lmapdCharts || {}).mounted;
         }""",
         timeout=timeout_s * 1000,
     )

@@ -1,0 +1,53 @@
+"""A new tab's first picture: the page does only the work that picture needs before it
+(docs/performance.md, "A new tab's first picture"). The charts' library (plotly's 4.6 MB bundle)
+is asked for only once the first frame is on screen, and the charts then draw; the scripts the
+page loads before its first frame stay within a byte budget; the drawer's panels of a choice not
+made (the Geiger-mode receiver's controls, the Sun's, fly-around's) are not built until chosen.
+The checks are orders of events and counts of bytes and elements, never times."""
+
+from __future__ import annotations
+
+import pytest
+from support.launch import wait_first_frame, wait_settled
+
+pytestmark = pytest.mark.browser
+
+# The page's scripts before its first frame: Vue, trame's client, Vuetify, vtk.js and the page's
+# own files come to about 2.6 MB; plotly's bundle alone is 4.6 MB.
+SCRIPT_BYTES_BEFORE_FIRST_FRAME = 3_500_000
+
+RESOURCES = """() => performance.getEntriesByType('resource')
+  .filter((r) => r.initiatorType === 'script' || r.name.endsWith('.js'))
+  .map((r) => ({ name: r.name, start: r.startTime, bytes: r.encodedBodySize }))"""
+
+
+def test_the_charts_library_loads_after_the_first_frame_and_the_charts_draw(page, app_url):
+    page.goto(app_url)
+    wait_first_frame(page)
+    page.wait_for_selector(".waveform-box .js-plotly-plot .scatterlayer .trace", timeout=120_000)
+    page.wait_for_selector(".snr-box .js-plotly-plot", timeout=120_000)
+    first = page.evaluate("() => window.lmapdFrames[0].t")
+    charts = page.evaluate("() => window.lmapdCharts")
+    scripts = page.evaluate(RESOURCES)
+    plotly = [s for s in scripts if "plotly" in s["name"]]
+    assert len(plotly) == 1, plotly  # asked for once, by the charts' loader
+    assert charts["requested"] >= first and plotly[0]["start"] >= first, (charts, plotly, first)
+    assert charts["loaded"] >= charts["requested"]
+    before = [s for s in scripts if s["start"] < first]
+    assert sum(s["bytes"] for s in before) < SCRIPT_BYTES_BEFORE_FIRST_FRAME, before
+    assert any("trame-vtk" in s["name"] for s in before)  # the views' library is among them
+
+
+def test_a_choices_own_controls_are_built_only_once_chosen(page, app_url):
+    page.goto(app_url)
+    wait_first_frame(page)
+    wait_settled(page)
+    hidden = (".gm-controls", ".sun-manual-controls", ".flyaround-panel")
+    assert [page.locator(sel).count() for sel in hidden] == [0, 0, 0]
+    page.locator(".receiver-gm").click()
+    page.locator(".gm-controls .v-slider").first.wait_for()
+    page.locator(".sun-manual").click()
+    page.locator(".sun-manual-controls .v-slider").first.wait_for()
+    page.locator(".receiver-lm").click()
+    page.locator(".gm-controls").wait_for(state="detached")
+    wait_settled(page)

@@ -27,7 +27,13 @@ from ..records import Outliers
 from . import first_photon as fp
 from . import histogram as gh
 from .false_points import expected_false_points
-from .figures import _pileup_timing, measured_figures, pileup_figures, predicted_range_m
+from .figures import (
+    _pileup_timing,
+    measured_figures,
+    pileup_figures,
+    predicted_range_m,
+    selection_offsets_m,
+)
 from .frame import ECHO_TAIL_SCALES, JITTER_REACH
 from .records import GmDetection, GmResponse
 from .windows import (
@@ -112,11 +118,16 @@ def detect(scene: Scene, echo: EchoStage, rx: GmResponse) -> GmDetection:
     w_sum = np.asarray(echo.weights).sum(axis=1)
     r_true_m = 0.5 * C * a_num.sum(axis=1) / np.where(w_sum > 0, w_sum, 1.0)
     p_d, sigma_weak_m = _predicted(scene, echo, rx, k_t[echo.pixel])
-    pred_m, sigma_m, skew = predicted_range_m(scene, echo, rx, pre, length, k_t[echo.pixel])
+    lit_k = k_t[echo.pixel]
+    pred_m, sigma_m, skew, counts = predicted_range_m(scene, echo, rx, pre, length, lit_k)
     # where the expected histogram holds no excess over the background (a pixel detected by
     # chance), the weak-signal sd stands
     sigma_m = np.where(np.isfinite(sigma_m), sigma_m, sigma_weak_m)
-    figures = pileup_figures(scene, rx.signal_pe, pred_m - r_true_m, sigma_m, skew, detected)
+    # at a few counts the threshold keeps the realisations whose counts bunch
+    shift_m, median_m = selection_offsets_m(scene, echo, counts, lit_k, pre, length)
+    figures = pileup_figures(
+        scene, rx.signal_pe, pred_m - r_true_m, sigma_m, skew, detected, shift_m, median_m
+    )
     figures.update(measured_figures(range_m - r_true_m, detected))
     false_pixel = np.minimum(1.0, n_windows * special.pdtrc(k_t - 1.0, mu_window))
     false_points = expected_false_points(scene, h.n_bins, width, rx.rate_hz, k_t, echo.pixel, p_d)

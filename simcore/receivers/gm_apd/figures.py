@@ -15,6 +15,7 @@ from ...constants import C
 from ...echo import EchoStage
 from ...scene import Scene
 from . import pileup as gp
+from . import selection as gs
 from .expected import Timing
 from .frame import frame_pulse_energy_j, photon_energy_j
 from .records import GmResponse
@@ -36,12 +37,13 @@ def predicted_range_m(
     scene: Scene, echo: EchoStage, rx: GmResponse, pre: int, length: int, min_counts=1.0
 ):
     """(n,) each lit pixel's range as its histogram gives it on average (pile-up, the
-    frame's finite pulses, jitter and bins included: :mod:`.pileup`), its sd [m] and its
-    skewness [1], for the frame's estimator (the centroid, or the first-photon fit of
-    ``gm.pileup_correction``); ``min_counts``: the lit pixels' thresholds in counts."""
+    frame's finite pulses, jitter and bins included: :mod:`.pileup`), its sd [m], its
+    skewness [1] and its expected signal counts in the window [1], for the frame's estimator
+    (the centroid, or the first-photon fit of ``gm.pileup_correction``); ``min_counts``: the
+    lit pixels' thresholds in counts."""
     gm = scene.gm
     if len(echo.pixel) == 0:
-        return np.zeros(0), np.zeros(0), np.zeros(0)
+        return np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0)
     t_lo = rx.gate_start_s
     pe_per_weight = gm.pde * frame_pulse_energy_j(scene) / photon_energy_j(scene.laser.wavelength_m)
     element_pe = pe_per_weight * np.asarray(echo.weights)
@@ -60,27 +62,74 @@ def predicted_range_m(
         gm.pileup_correction,
         min_counts,
     )
-    return 0.5 * C * (t_lo + pred.t_s), 0.5 * C * pred.sd_s, pred.skew
+    return 0.5 * C * (t_lo + pred.t_s), 0.5 * C * pred.sd_s, pred.skew, pred.signal_counts
+
+
+def selection_offsets_m(scene: Scene, echo: EchoStage, counts, k_t, pre: int, length: int):
+    """(n,) what detection's threshold does to each lit pixel's centroid at a few counts
+    (:mod:`.selection`): the detected pixels' mean error less the expected histogram's
+    centroid [m] (0 beyond the table), and their median error less that centroid [m] (NaN
+    beyond the table: the Cornish-Fisher term stands). Both 0 / NaN for the first-photon fit
+    (not a centroid) and for analysis windows of more than gp.MAX_BINS bins (TDC bins far
+    finer than the pulse)."""
+    gm = scene.gm
+    n = len(counts)
+    zero, none = np.zeros(n), np.full(n, np.nan)
+    if n == 0 or gm.pileup_correction == "fit" or length > gp.MAX_BINS:
+        return zero, none
+    table = gs.selection_table(
+        echo.shape.tau_s / echo.shape.a,
+        gm.jitter_s,
+        gm.bin_s,
+        window_bins(scene, echo),
+        int(pre),
+        int(length),
+        int(gm.pulses),
+        bool(gm.coates),
+    )
+    shift_s, median_s = gs.selection_shifts(table, counts, gm.pulses, k_t)
+    return 0.5 * C * shift_s, 0.5 * C * median_s
 
 
 SATURATED_SHARE = 1.0 - np.exp(-1.0)  # a pixel is piled up when its echo fires it this often
 
 
-def pileup_figures(scene: Scene, signal_pe, bias_m, sigma_m, skew, detected) -> dict:
+def pileup_figures(
+    scene: Scene,
+    signal_pe,
+    bias_m,
+    sigma_m,
+    skew,
+    detected,
+    shift_m=None,
+    median_m=None,
+) -> dict:
     """The summary's Geiger-mode figures, predicted for the histogram's estimator [m]: the
     range bias, the median of the detected pixels' errors (of the mixture of their laws, each
-    N(b_i - g_i sigma_i / 6, sigma_i^2): its median by the Cornish-Fisher term of its skewness
-    g_i where it has under one photoelectron per pulse, and pixels of different flux have
-    different biases), and the scatter, the
-    sd of those errors about their mean, sqrt(mean sigma_i^2 + Var b_i); the share of lit pixels
-    with over one photoelectron per pulse (their echo fires them in more than 1 - 1/e of the
-    pulses: piled up), and a warning when most are."""
+    N(m_i, sigma_i^2), pixels of different flux having different biases; m_i the median of
+    pixel i's errors given that it is detected: where it has under one photoelectron per pulse,
+    b_i plus ``median_m`` (detection's selection and the skewness of a few counts, from
+    :mod:`.selection`) or, beyond that table, b_i - g_i sigma_i / 6 (the Cornish-Fisher term of
+    its skewness g_i); b_i otherwise), and the scatter, the sd of those errors about their mean,
+    sqrt(mean sigma_i^2 + Var b_i), b_i shifted by ``shift_m`` (the selection's shift of the
+    detected pixels' mean); the share of lit pixels with over one photoelectron per pulse (their
+    echo fires them in more than 1 - 1/e of the pulses: piled up), and a warning when most
+    are."""
+    n = len(bias_m)
+    shift_m = np.zeros(n) if shift_m is None else np.asarray(shift_m, dtype=np.float64)
+    median_m = np.full(n, np.nan) if median_m is None else np.asarray(median_m, dtype=np.float64)
     sel = detected & np.isfinite(bias_m) & np.isfinite(sigma_m)
     sat = float(np.mean(signal_pe > 1.0)) if len(signal_pe) else 0.0
-    # the skewness of a centroid of few counts (not of a piled-up estimate, whose law the
-    # rare re-armed pulses shape)
+    # the skewness of a centroid of few counts and the threshold's selection of them (not of
+    # a piled-up estimate, whose law the rare re-armed pulses shape)
     starved = np.asarray(signal_pe)[sel] <= 1.0
-    median_i = bias_m[sel] - np.where(starved, skew[sel], 0.0) * sigma_m[sel] / 6.0
+    tabled = starved & np.isfinite(median_m[sel])
+    median_i = np.where(
+        tabled,
+        bias_m[sel] + np.where(tabled, median_m[sel], 0.0),
+        bias_m[sel] - np.where(starved, skew[sel], 0.0) * sigma_m[sel] / 6.0,
+    )
+    bias_m = bias_m + np.where(np.asarray(signal_pe) <= 1.0, shift_m, 0.0)
     bias = mixture_median(median_i, sigma_m[sel]) if sel.any() else None
     # the cloud's scatter about its mean: each pixel's sd and the spread of the pixels' biases
     spread = np.mean(sigma_m[sel] ** 2) + np.var(bias_m[sel]) if sel.any() else np.nan

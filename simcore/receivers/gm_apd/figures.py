@@ -77,6 +77,8 @@ def selection_offsets_m(scene: Scene, echo: EchoStage, counts, k_t, pre: int, le
     zero, none = np.zeros(n), np.full(n, np.nan)
     if n == 0 or gm.pileup_correction == "fit" or length > gp.MAX_BINS:
         return zero, none
+    if not np.any((counts > 0) & (counts <= gs.MU_MAX)):  # no pixel the table reaches
+        return zero, none
     table = gs.selection_table(
         echo.shape.tau_s / echo.shape.a,
         gm.jitter_s,

@@ -227,7 +227,10 @@ def _nearest_subray(hits: Hits, pixel, range_m, kernel=None) -> tuple[np.ndarray
     for block in hits.blocks():
         if not len(block.pixel):
             continue
-        row = np.minimum(np.searchsorted(block.pixel, pixel), len(block.pixel) - 1)
+        if block.pixel[0] == 0 and block.pixel[-1] == len(block.pixel) - 1:
+            row = pixel  # every pixel, in order (sorted and distinct): each pixel is its row
+        else:
+            row = np.minimum(np.searchsorted(block.pixel, pixel), len(block.pixel) - 1)
         mine = np.flatnonzero(block.pixel[row] == pixel)
         if not len(mine):
             continue

@@ -76,3 +76,14 @@ def test_hits_echoes_and_clouds_do_not_depend_on_the_chunks(case, monkeypatch):
 def test_any_per_row_is_numpys_any_along_rows(shape):
     mask = np.random.default_rng(1).random(shape) < 0.1
     assert np.array_equal(echo_stage.any_per_row(mask), mask.any(axis=1))
+
+
+def test_small_regions_run_on_one_thread_and_large_ones_on_the_frames():
+    before = parallel.threads()
+    parallel.set_threads(3)
+    try:
+        assert parallel.threads_for(100, 65536) == 1
+        assert parallel.threads_for(65536, 65536) == 3
+        assert parallel.threads_for(0, 0) == 3
+    finally:
+        parallel.set_threads(before)

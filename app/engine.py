@@ -175,10 +175,13 @@ class Engine:
         scene: simcore.Scene,
         model: simcore.TargetModel | None = None,
         frame_budget_bytes: int = FRAME_BUDGET_BYTES,
+        shared: simcore.Pipeline | None = None,
     ):
         """``model``: the scene's target if already loaded (else it is loaded here);
         ``frame_budget_bytes``: a frame estimated to take more memory is refused before it runs
-        (frame_bytes)."""
+        (frame_bytes); ``shared``: a pipeline whose target stage (the mesh and its ray-casting
+        structure) this engine's pipelines take instead of building their own (the sessions'
+        preloaded parent, app.server.zygote, shares one with every session it forks)."""
         self.frame_budget_bytes = frame_budget_bytes
         self.model = model if model is not None else simcore.load_target(scene.target)
         self.frame = scene3d.display_frame(self.model)
@@ -187,6 +190,11 @@ class Engine:
         # target stage (the mesh and its ray-casting structure: clearing it cost each preview
         # 90 ms at 128 x 128, ten times the preview itself)
         self.preview_pipeline = simcore.Pipeline()
+        # ... but one target stage between the two, built by whichever runs first: the MRO's is
+        # 10-20 MB of ray-casting structure and 9 MB of mesh arrays (read-only once built)
+        for pipeline in (self.pipeline, self.preview_pipeline):
+            if shared is not None:
+                pipeline.adopt(shared)
         self.vertices_d = self.frame.from_target(self.model.mesh.vertices)  # display frame
         # key (the seen set's content), seen-facets mesh, legend
         self._facets: tuple | None = None
@@ -210,6 +218,7 @@ class Engine:
             check_budget(self.pipeline, request.scene)
             return stale()
 
+        self.pipeline.adopt(self.preview_pipeline, scene=request.scene)  # its target, if built
         try:
             result = self.pipeline.run(request.scene, should_stop=should_stop)
         except simcore.Cancelled:
@@ -267,6 +276,7 @@ class Engine:
             check_budget(self.preview_pipeline, scene)
             return stale()
 
+        self.preview_pipeline.adopt(self.pipeline, scene=scene)
         try:
             result = self.preview_pipeline.run(scene, should_stop=should_stop)
         except simcore.Cancelled:

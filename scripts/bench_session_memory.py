@@ -89,8 +89,15 @@ async def one_mode(fork: bool, n: int) -> dict:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sessions", type=int, default=10)
+    parser.add_argument(
+        "--modes",
+        nargs="+",
+        choices=("process", "fork"),
+        default=["process", "fork"],
+        help="a process per session, forked sessions, or both (the default)",
+    )
     args = parser.parse_args(argv)
-    for fork in (False, True):
+    for fork in [mode == "fork" for mode in args.modes]:
         r = asyncio.run(one_mode(fork, args.sessions))
         mode = "forked from the parent" if fork else "a process each     "
         print(

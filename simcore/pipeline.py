@@ -64,13 +64,33 @@ class Pipeline:
     def clear(self) -> None:
         self._cache.clear()
 
-    def adopt(self, other: Pipeline, stages: tuple[str, ...] = ("target",)) -> None:
+    def adopt(
+        self, other: Pipeline, stages: tuple[str, ...] = ("target",), scene: Scene | None = None
+    ) -> None:
         """Take ``other``'s cached outputs of ``stages`` (read-only, so they can be shared by
         pipelines of one thread: a target's mesh and BVH loaded once for several of them); a
-        stage whose key differs is computed again as usual."""
+        stage whose key differs is computed again as usual. Without ``scene`` only the stages
+        this pipeline has not cached are taken; with it, every one of ``other``'s that is
+        ``scene``'s (its inputs unchanged) and not already this pipeline's."""
+        keys = self._keys(scene) if scene is not None else {}
         for name in stages:
-            if name in other._cache and name not in self._cache:
-                self._cache[name] = other._cache[name]
+            theirs = other._cache.get(name)
+            if theirs is None:
+                continue
+            ours = self._cache.get(name)
+            if scene is None:
+                if ours is None:
+                    self._cache[name] = theirs
+            elif theirs[0] == keys.get(name) and (ours is None or ours[0] != theirs[0]):
+                self._cache[name] = theirs
+
+    @staticmethod
+    def _keys(scene: Scene) -> dict[str, tuple]:
+        """Every stage's cache key for ``scene`` (its reads and its upstream stages' keys)."""
+        keys: dict[str, tuple] = {}
+        for stage in CHAIN:
+            keys[stage.name] = (stage.reads(scene), *(keys[u] for u in stage.upstream))
+        return keys
 
     def run(
         self,

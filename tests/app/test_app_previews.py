@@ -128,3 +128,35 @@ def test_seen_facets_are_rebuilt_and_sent_only_when_the_set_of_facets_seen_chang
     change(app, pitch_deg=40.0)  # the target turns: another set of facets
     assert "seen_facets" in [keys for keys in sent if "frame_key" in keys][-1]
     assert logic.last_frame.faces_key != before.faces_key
+
+
+def test_the_previews_and_the_frames_share_one_target_stage(model):
+    """The previews keep a cache of their own, but not a second copy of the target's mesh and
+    ray-casting structure: whichever pipeline builds the target stage first, the other takes it
+    (and a target the other has not built yet is never taken in place of the right one)."""
+    scene = simcore.with_overrides(simcore.load_scene(), pixels=16)
+    engine = Engine(scene, model)
+    engine.compute_preview(Request(scene=scene))
+    engine.compute(Request(scene=scene))
+    built = engine.preview_pipeline.cached("target", scene)
+    assert built is not None and engine.pipeline.cached("target", scene) is built
+    cube = simcore.with_overrides(scene, {"target.mesh": "cube"})
+    engine.compute(Request(scene=cube))  # the frames move to another target first
+    engine.compute_preview(Request(scene=scene))  # a preview of the first keeps its own
+    assert engine.preview_pipeline.cached("target", scene) is built
+    engine.compute_preview(Request(scene=cube))
+    assert engine.preview_pipeline.cached("target", cube) is engine.pipeline.cached("target", cube)
+
+
+def test_an_engine_takes_the_target_stage_of_a_shared_pipeline(model):
+    """The sessions' preloaded parent builds the target stage once; each session's engine takes
+    it for its frames and its previews (app.server.zygote)."""
+    scene = simcore.with_overrides(simcore.load_scene(), pixels=8)
+    shared = simcore.Pipeline()
+    shared.run(scene)
+    engine = Engine(scene, model, shared=shared)
+    built = shared.cached("target", scene)
+    engine.compute(Request(scene=scene))
+    engine.compute_preview(Request(scene=scene))
+    assert engine.pipeline.cached("target", scene) is built
+    assert engine.preview_pipeline.cached("target", scene) is built

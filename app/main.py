@@ -35,6 +35,10 @@ from app.state import state_keys
 from app.ui.layout import build_layout
 
 _server_ids = itertools.count()
+# Sessions forked from one preloaded parent (app.server.zygote) where the system forks cleanly:
+# 30 of them held 3.0 GB against 7.1 GB as processes of their own, and a new one had its first
+# frame in 0.8-1.4 s against 2.1 s (scripts/bench_session_memory.py, docs/serving.md)
+FORK_BY_DEFAULT = sys.platform.startswith("linux")
 
 
 class LmapdApp:
@@ -200,16 +204,25 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument(
         "--no-spare", action="store_true", help="start no process ahead of the next tab"
     )
-    parser.add_argument(
+    sessions = parser.add_mutually_exclusive_group()
+    sessions.add_argument(
         "--fork-sessions",
         action="store_true",
         help="fork each tab's session from one parent process that has loaded the app once "
-        "(quicker to start, less memory; Linux)",
+        "(quicker to start, less memory; the default on Linux)",
+    )
+    sessions.add_argument(
+        "--process-sessions",
+        action="store_true",
+        help="start each tab's session as a process of its own (the default where processes "
+        "cannot be forked: not Linux)",
     )
     # a session's process (started by the launcher): its token is the first line of stdin,
     # and it stops when stdin closes (the launcher is gone)
     parser.add_argument("--token-stdin", action="store_true", help=argparse.SUPPRESS)
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    args.fork_sessions = not args.process_sessions and (args.fork_sessions or FORK_BY_DEFAULT)
+    return args
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -31,7 +31,7 @@ port) and proxies everything under ``/s/<session id>/`` to it:
   whose launcher vanishes (even by SIGKILL) stops when its stdin closes;
 * connections (app.server.connections): idle or partial ones are closed after 10 s, each address
   holds at most a few hundred, and refusals are logged one short line each, never with the token;
-* with ``zygote`` (``lmapd app --fork-sessions``) the session processes are forked from one
+* with ``zygote`` (``lmapd app``'s default on Linux) the session processes are forked from one
   preloaded parent (app.server.zygote) instead of started afresh: they share its modules, target and
   compiled kernels.
 """
@@ -68,11 +68,11 @@ MIB = 2**20
 # (354-370 MB, median 357 MB, with its preview's stages, scripts/bench_sessions.py, 2026-11-25);
 # the default session cap is derived from it.
 SESSION_RSS_BYTES = 370 * MIB
-# A session forked from the zygote (--fork-sessions): 10 such sessions and their parent held
-# 1,535 MB of proportional set size after each one's first 256 x 256 frame (154 MB a session;
-# 2,424 MB as processes of their own; scripts/bench_session_memory.py, 2026-11-26, a loaded
-# 2-core machine); counted at 200 MB.
-FORKED_SESSION_BYTES = 200 * MIB
+# A session forked from the zygote (the default on Linux): 30 such sessions and their parent held
+# 3,018 MB of proportional set size after each one's first 256 x 256 frame (101 MB a session,
+# the parent's share included; 7,112 MB as processes of their own; they share the parent's
+# target stage: scripts/bench_session_memory.py, 2026-11-26); counted at 128 MB.
+FORKED_SESSION_BYTES = 128 * MIB
 MAX_DEFAULT_SESSIONS = 30  # a class
 MEMORY_SHARE = 0.75  # of the memory available at start, for the children together
 FRAME_BYTES = security.WS_CHUNK_BYTES + 4096  # one websocket frame: a wslink chunk and its header
@@ -373,25 +373,39 @@ class Launcher:
         problem = self.over_caps(address)
         if problem:
             return self.refuse(request, problem)
+        # the tab hears at once that its session is starting (a process may take seconds when a
+        # class opens together); its cookies are made now and the way in is sent when it listens
+        session_id = secrets.token_urlsafe(16)
+        secret = secrets.token_urlsafe(32)
+        page = web.StreamResponse(status=200, headers=NO_STORE)
+        page.content_type = "text/html"
+        page.charset = "utf-8"
+        page.set_cookie(
+            session_cookie(session_id),
+            secret,
+            path=f"/s/{session_id}/",
+            httponly=True,
+            samesite="Strict",
+            max_age=int(self.caps.max_age_s) + 60,
+        )
+        page.set_cookie(
+            self._client_cookie(request), client, httponly=True, samesite="Strict", path="/"
+        )
         self.n_starting += 1
         try:
+            ahead = self.n_starting - 1
+            await page.prepare(request)
+            await page.write(starting_page(ahead).encode())
             await self._make_room_for(client)
             child = await self._take_child()
         except StartFailed as exc:
             log.error("a session's process did not start: %s", exc)
-            return message_page(
-                503,
-                "The session could not start",
-                "The simulator's process for this tab did not start (the server's log says "
-                "why). Try again in a moment.",
-                self._root_link(request),
-                "Try again",
-            )
+            await _finish(page, start_failed_html(self._root_link(request)))
+            return page
         finally:
             self.n_starting -= 1
-        session_id = secrets.token_urlsafe(16)
         now = time.monotonic()
-        child.secret = secrets.token_urlsafe(32)
+        child.secret = secret
         child.client, child.address = client, address
         child.idle_since_s = child.opened_s = child.last_input_s = now
         self.sessions[session_id] = child
@@ -399,19 +413,9 @@ class Launcher:
         log.info("session %s: process %d on port %d", session_id[:6], child.pid, child.port)
         settings = [(k, v) for k, v in request.query.items() if k != "token"]
         target = f"/s/{session_id}/" + ("?" + _query(settings) if settings else "")
-        response = move_page(f"{target}#token={_q(self.token)}")
-        response.set_cookie(
-            session_cookie(session_id),
-            child.secret,
-            path=f"/s/{session_id}/",
-            httponly=True,
-            samesite="Strict",
-            max_age=int(self.caps.max_age_s) + 60,
-        )
-        response.set_cookie(
-            self._client_cookie(request), client, httponly=True, samesite="Strict", path="/"
-        )
-        return response
+        if not await _finish(page, move_html(f"{target}#token={_q(self.token)}")):
+            await self.end_session(session_id, "its tab closed before the session started")
+        return page
 
     def _client_cookie(self, request: web.Request) -> str:
         return f"lmapd-client-{security._local_port(request)}"
@@ -759,19 +763,54 @@ def session_cookie(session_id: str) -> str:
     return f"lmapd-session-{session_id}"
 
 
-def move_page(location: str) -> web.Response:
-    """A page that moves its tab to ``location`` (in place, so Back does not reopen the door).
-    A script's navigation is same-site, so the session's SameSite=Strict cookie is sent even
-    when the door was opened from a link on another site (a redirect would not send it)."""
+STARTING_HEAD = (
+    "<!doctype html><html lang='en'><head><meta charset='utf-8'>"
+    "<title>lmapd-sim: starting</title></head>"
+    "<body style='font-family: sans-serif; max-width: 40em; margin: 3em auto'>"
+)
+
+
+def starting_page(ahead: int) -> str:
+    """The first words a tab gets from the door, before its session's process is ready."""
+    queue = f" ({ahead} more starting before it)" if ahead > 0 else ""
+    return (
+        f"{STARTING_HEAD}<h1 class='launcher-title'>lmapd-sim</h1>"
+        f"<p class='launcher-message' role='status'>Starting your session{queue}…</p>\n"
+    )
+
+
+def move_html(location: str) -> str:
+    """The end of the door's page: moves its tab to ``location`` (in place, so Back does not
+    reopen the door). A script's navigation is same-site, so the session's SameSite=Strict
+    cookie is sent even when the door was opened from a link on another site (a redirect would
+    not send it)."""
     target = html.escape(location, quote=True)
     script = json.dumps(location).replace("<", "\\u003c")
-    body = (
-        "<!doctype html><html lang='en'><head><meta charset='utf-8'>"
-        "<title>lmapd-sim</title></head><body style='font-family: sans-serif'>"
+    return (
         f"<p><a class='launcher-link' href='{target}'>Open the simulator</a></p>"
         f"<script>window.location.replace({script});</script></body></html>"
     )
-    return web.Response(status=200, text=body, content_type="text/html", headers=NO_STORE)
+
+
+def start_failed_html(link: str) -> str:
+    """The end of the door's page when the session's process did not start."""
+    return (
+        "<h1 class='launcher-title'>The session could not start</h1>"
+        "<p class='launcher-message'>The simulator's process for this tab did not start (the "
+        "server's log says why). Try again in a moment.</p>"
+        f"<p><a class='launcher-link' href='{html.escape(link, quote=True)}'>Try again</a></p>"
+        "</body></html>"
+    )
+
+
+async def _finish(page: web.StreamResponse, rest: str) -> bool:
+    """Send the rest of a streamed page and end it; False if the tab had gone."""
+    try:
+        await page.write(rest.encode())
+        await page.write_eof()
+    except (ConnectionError, RuntimeError):
+        return False
+    return True
 
 
 def _query(pairs) -> str:

@@ -310,6 +310,74 @@ def test_over_the_caps_a_503_page_says_how_many_sessions_are_open():
     run(body)
 
 
+def gated(launcher: lau.Launcher) -> asyncio.Event:
+    """Hold the launcher's session processes back from starting until the returned event is
+    set (a class opening together on a slow machine, a session that takes seconds)."""
+    gate = asyncio.Event()
+    start = launcher.start_child
+
+    async def held_start():
+        await gate.wait()
+        return await start()
+
+    launcher.start_child = held_start
+    return gate
+
+
+def test_the_door_says_at_once_that_the_session_is_starting_and_moves_the_tab_when_it_listens():
+    async def body():
+        async with serving(caps(spare=False)) as (launcher, base, client):
+            gate = gated(launcher)
+            url = f"{base}/?token={TOKEN}&pixels=32"
+            answering = client.get(url, allow_redirects=False, headers=NAVIGATION)
+            async with await asyncio.wait_for(answering, WAIT_S) as answer:
+                assert answer.status == 200
+                first = await asyncio.wait_for(answer.content.readuntil(b"\n"), WAIT_S)
+                assert b"Starting your session" in first and b"location" not in first
+                assert launcher.n_starting == 1 and not launcher.sessions  # nothing listens yet
+                gate.set()
+                rest = (await asyncio.wait_for(answer.content.read(), WAIT_S)).decode()
+                cookies = {k: m.value for k, m in answer.cookies.items()}
+            location = json.loads(MOVE.search(rest)[1])
+            (session_id,) = launcher.sessions
+            assert location.startswith(f"/s/{session_id}/?pixels=32")
+            assert cookies[lau.session_cookie(session_id)] == launcher.sessions[session_id].secret
+
+    run(body)
+
+
+def test_a_tab_closed_while_its_session_starts_leaves_no_session_behind():
+    async def body():
+        async with serving(caps(spare=False)) as (launcher, base, client):
+            gate = gated(launcher)
+            answering = client.get(f"{base}/?token={TOKEN}", headers=NAVIGATION)
+            answer = await asyncio.wait_for(answering, WAIT_S)
+            first = await asyncio.wait_for(answer.content.readuntil(b"\n"), WAIT_S)
+            assert b"Starting your session" in first
+            answer.close()  # the tab went away (closed, or navigated elsewhere)
+            await asyncio.sleep(0.2)
+            gate.set()
+            await until(lambda: launcher.n_starting == 0, "the start to finish")
+            await until(lambda: not launcher.sessions and not launcher._all, "the session to end")
+
+    run(body)
+
+
+def test_a_session_that_cannot_start_ends_its_page_with_a_message_and_a_link():
+    def failing(scene, options=()):
+        return [sys.executable, "-c", "raise SystemExit(3)"]
+
+    async def body():
+        async with serving(caps(spare=False)) as (launcher, base, client):
+            launcher.command = failing
+            status, page, _ = await open_door(client, base)
+            assert status == 200 and "Starting your session" in page
+            assert "could not start" in page and "Try again" in page
+            assert "location.replace" not in page and not launcher.sessions
+
+    run(body)
+
+
 def test_a_burst_of_page_loads_counts_starting_sessions_at_their_size():
     """Five tabs opened at once under a cap that fits two sessions start two: a process that
     is still starting counts at a session's measured size, not at the little it uses yet."""
@@ -468,7 +536,8 @@ def _descendants(pid: int) -> list[psutil.Process]:
 def test_the_real_launcher_proxies_a_session_and_leaves_no_process_after_sigterm(tmp_path, fork):
     """A session through the real launcher: its own process (``python -m app``), or forked from
     the preloaded parent (``--fork-sessions``: the parent and the session)."""
-    options = ("--max-sessions", "2", "--no-spare") + (("--fork-sessions",) if fork else ())
+    options = ("--max-sessions", "2", "--no-spare")
+    options += ("--fork-sessions",) if fork else ("--process-sessions",)
     with app_process(log_path=tmp_path / "server.log", sessions=True, app_args=options) as running:
 
         async def body():
@@ -511,7 +580,7 @@ def test_the_real_launcher_proxies_a_session_and_leaves_no_process_after_sigterm
 @pytest.mark.parametrize("fork", [False, True], ids=["processes", "forked"])
 def test_sessions_stop_when_their_launcher_is_killed(tmp_path, fork):
     cmd = [sys.executable, "-m", "app", "--port", "0", "--max-sessions", "1"]
-    cmd += ["--fork-sessions"] if fork else []
+    cmd += ["--fork-sessions"] if fork else ["--process-sessions"]
     root = Path(__file__).resolve().parents[2]
     with open(tmp_path / "out.log", "w+b") as out:
         proc = subprocess.Popen(cmd, cwd=root, stdout=out, stderr=subprocess.STDOUT)
@@ -639,6 +708,16 @@ def test_a_malformed_request_logs_one_short_line_without_the_token(tmp_path):
     malformed = [line for line in lines if "malformed" in line]
     assert len(malformed) == len(requests), lines
     assert any("without the token" in line for line in lines) and len(lines) <= len(requests) + 1
+
+
+def test_sessions_are_forked_by_default_on_linux_and_processes_of_their_own_on_request():
+    import app.main as app_main
+
+    assert app_main.parse_args([]).fork_sessions == sys.platform.startswith("linux")
+    assert app_main.parse_args(["--fork-sessions"]).fork_sessions
+    assert not app_main.parse_args(["--process-sessions"]).fork_sessions
+    with pytest.raises(SystemExit):  # one or the other
+        app_main.parse_args(["--fork-sessions", "--process-sessions"])
 
 
 def test_lmapd_app_passes_the_session_and_proxy_options_on(monkeypatch):

@@ -342,16 +342,21 @@ class Launcher:
             )
         if path not in ("/", "/index.html") or websocket:
             return web.Response(status=404, text="Not found\n")
-        response = await self.new_session(request)
-        if from_address and not response.prepared:
-            response.set_cookie(
-                self.door.cookie_name(request), self.token, httponly=True, samesite="Strict"
-            )
+        # the token from the address goes into the browser's cookie, on every page the door
+        # answers (a streamed one sends its headers before the handler returns)
+        token_cookie = self.door.cookie_name(request) if from_address else None
+        response = await self.new_session(request, token_cookie)
+        if token_cookie and not response.prepared:
+            response.set_cookie(token_cookie, self.token, httponly=True, samesite="Strict")
         return response
 
-    async def new_session(self, request: web.Request) -> web.StreamResponse:
+    async def new_session(
+        self, request: web.Request, token_cookie: str | None = None
+    ) -> web.StreamResponse:
         """Start a session for a browser's navigation (the spare process if one is ready) and
-        send the tab to it; anything else (HEAD, a prefetch, a subresource) starts nothing."""
+        send the tab to it; anything else (HEAD, a prefetch, a subresource) starts nothing.
+        ``token_cookie``: the name of the cookie that keeps the launch's token in the browser,
+        if the page it answers must set it."""
         if request.method == "HEAD":
             return web.Response(status=200, content_type="text/html", headers=NO_STORE)
         problem = navigation_problem(request.headers)
@@ -391,6 +396,8 @@ class Launcher:
         page.set_cookie(
             self._client_cookie(request), client, httponly=True, samesite="Strict", path="/"
         )
+        if token_cookie:
+            page.set_cookie(token_cookie, self.token, httponly=True, samesite="Strict")
         self.n_starting += 1
         try:
             ahead = self.n_starting - 1

@@ -342,6 +342,8 @@ def test_the_door_says_at_once_that_the_session_is_starting_and_moves_the_tab_wh
             (session_id,) = launcher.sessions
             assert location.startswith(f"/s/{session_id}/?pixels=32")
             assert cookies[lau.session_cookie(session_id)] == launcher.sessions[session_id].secret
+            port = urllib.parse.urlsplit(base).port
+            assert cookies[f"lmapd-token-{port}"] == TOKEN  # the address's token, kept
 
     run(body)
 

@@ -1,18 +1,27 @@
-"""Benchmark of the launcher (``lmapd app`` without ``--shared``): a new tab's time to its first
-frame with the warm spare process and without it, and one session's memory after its first frame
-(paper scene, 256 x 256, real headless Chromium).
+"""Benchmark of the launcher (``lmapd app`` without ``--shared``) as a class meets it, in real
+headless Chromium: tabs opened together, each tab's time to its first words (the door's "Starting
+your session") and to its first frame painted; and one tab's first frame while other sessions are
+open (paper scene, 256 x 256, 1280 x 720 pages).
 
-    .venv/bin/python scripts/bench_sessions.py [--repeats 5]
+    .venv/bin/python scripts/bench_sessions.py [--tabs 1 5] [--open 10] [--repeats 3]
+                                               [--modes fork process]
 
-Each repeat starts a launcher with a spare and one without (interleaved), waits until the spare
-(if any) listens, then opens the printed address in a fresh page and times, in the page's clock,
-from the navigation's start to the first frame painted (the page logs it: window.lmapdFrames);
-then reads the session process's resident memory (RSS). Medians with their range are printed.
+For each repeat, mode (sessions forked from the preloaded parent, the default on Linux, or a
+process each) and count of tabs: a launcher starts, its spare session is left to get ready,
+``--open`` sessions are opened without a browser (as bench_session_memory.py does, each to its
+first frame), then the tabs open the printed address at the same moment, each in a browser
+context of its own (a student's browser). Times are wall-clock seconds from that moment, measured
+here: the door's first answer (the response's headers and first words) and the first frame
+painted (the page logs it: window.lmapdFrames). Medians with their range over every tab of every
+repeat are printed; the one-minute load average is printed beside them (the machine must be quiet
+for these times to mean anything).
 """
 
 from __future__ import annotations
 
 import argparse
+import asyncio
+import os
 import statistics
 import sys
 import time
@@ -20,78 +29,116 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))  # the drivers: support.*
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import psutil
-from playwright.sync_api import sync_playwright
+from bench_session_memory import open_session
+from playwright.async_api import async_playwright
 from support.launch import (
     CHROMIUM_ARGS,
     CHROMIUM_PATH,
+    JS_FRAMES,
     app_process,
     chromium_missing_message,
-    wait_first_frame,
-    wait_settled,
 )
 
-FIRST_FRAME_MS = "() => window.lmapdFrames[0].t"  # performance.now(): from the navigation's start
+SPARE_WAIT_S = 120.0
+FRAME_WAIT_S = 300.0
 
 
-def listening(proc: psutil.Process) -> bool:
+def _listening(proc: psutil.Process) -> bool:
     try:
         return any(c.status == psutil.CONN_LISTEN for c in proc.net_connections())
     except psutil.Error:
         return False
 
 
-def one_tab(browser, spare: bool) -> tuple[float, float]:
-    """(ms from navigation to the first frame, the session's RSS in MB after it settled)."""
-    options = () if spare else ("--no-spare",)
-    with app_process(sessions=True, app_args=options) as running:
-        launcher = psutil.Process(running.pid)
-        deadline = time.monotonic() + 120
-        while spare and not any(listening(c) for c in launcher.children()):
-            if time.monotonic() > deadline:
-                raise RuntimeError("the spare did not start")
-            time.sleep(0.1)
-        time.sleep(1.0)  # let the spare finish its own first frame (it computes one at start)
-        page = browser.new_page(viewport={"width": 1600, "height": 1000})
-        page.goto(running.url)
-        wait_first_frame(page, timeout_s=300)
-        ms = float(page.evaluate(FIRST_FRAME_MS))
-        wait_settled(page, timeout_s=300)
-        sessions = launcher.children()  # without a spare: the one session
-        rss_mb = max(c.memory_info().rss for c in sessions) / 2**20 if sessions else 0.0
-        page.close()
-        return ms, rss_mb
+async def _spare_ready(launcher_pid: int) -> None:
+    """Wait until a session process (the spare) listens, then a little for its own first frame."""
+    deadline = time.monotonic() + SPARE_WAIT_S
+    launcher = psutil.Process(launcher_pid)
+    while not any(_listening(c) for c in launcher.children(recursive=True)):
+        if time.monotonic() > deadline:
+            raise RuntimeError("the spare session did not start")
+        await asyncio.sleep(0.1)
+    await asyncio.sleep(2.0)
+
+
+async def _one_tab(browser, url: str, t0: float) -> tuple[float, float]:
+    """(s to the door's first answer, s to the first frame painted), both from ``t0``."""
+    context = await browser.new_context(viewport={"width": 1280, "height": 720})
+    page = await context.new_page()
+    answered: list[float] = []
+    page.on("response", lambda _r: answered or answered.append(time.perf_counter() - t0))
+    await page.goto(url, wait_until="commit")
+    await page.wait_for_function(JS_FRAMES + " > 0", timeout=FRAME_WAIT_S * 1000)
+    painted = time.perf_counter() - t0
+    await context.close()
+    return answered[0] if answered else float("nan"), painted
+
+
+async def one_round(browser, fork: bool, tabs: int, n_open: int) -> list[tuple[float, float]]:
+    mode = "--fork-sessions" if fork else "--process-sessions"
+    args = (mode, "--max-sessions", str(n_open + tabs + 2))
+    with app_process(sessions=True, app_args=args) as running:
+        await _spare_ready(running.pid)
+        held = []
+        for _ in range(n_open):
+            client, _page, _s = await open_session(running)
+            held.append(client)
+        t0 = time.perf_counter()
+        times = await asyncio.gather(*(_one_tab(browser, running.url, t0) for _ in range(tabs)))
+        for client in held:
+            await client.close()
+    return list(times)
+
+
+def _line(values: list[float]) -> str:
+    return (
+        f"{statistics.median(values):.2f} s (range {min(values):.2f}-{max(values):.2f}, "
+        f"n={len(values)})"
+    )
+
+
+async def main_async(args) -> int:
+    async with async_playwright() as pw:
+        browser = await pw.chromium.launch(executable_path=CHROMIUM_PATH, args=CHROMIUM_ARGS)
+        results: dict[tuple[str, int], list[tuple[float, float]]] = {}
+        loads = []
+        for _ in range(args.repeats):
+            for mode in args.modes:
+                for tabs in args.tabs:
+                    loads.append(os.getloadavg()[0])
+                    times = await one_round(browser, mode == "fork", tabs, args.open)
+                    results.setdefault((mode, tabs), []).extend(times)
+                    print(
+                        f"{mode}, {tabs} tab(s), {args.open} open: "
+                        + ", ".join(f"{a:.2f}/{b:.2f}" for a, b in times)
+                        + " s (first words / first frame)",
+                        flush=True,
+                    )
+        await browser.close()
+    print(f"\none-minute load average at each round's start: {min(loads):.1f}-{max(loads):.1f}")
+    for (mode, tabs), times in results.items():
+        label = "forked" if mode == "fork" else "a process each"
+        print(f"{label}, {tabs} tab(s) together, {args.open} sessions open:")
+        print(f"  first words (the door's answer): {_line([a for a, _ in times])}")
+        print(f"  first frame painted:             {_line([b for _, b in times])}")
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--tabs", type=int, nargs="+", default=[1, 5])
+    parser.add_argument("--open", type=int, default=0, help="sessions open before the tabs")
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--modes", nargs="+", choices=("fork", "process"), default=["fork"])
     args = parser.parse_args(argv)
     problem = chromium_missing_message()
     if problem:
         print(problem, file=sys.stderr)
         return 1
-    with_spare, without, rss = [], [], []
-    with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=CHROMIUM_PATH, args=CHROMIUM_ARGS)
-        for _ in range(args.repeats):
-            for spare, times in ((True, with_spare), (False, without)):
-                ms, rss_mb = one_tab(browser, spare)
-                times.append(ms)
-                if not spare:
-                    rss.append(rss_mb)
-                print(f"{'with' if spare else 'without'} spare: {ms:.0f} ms, {rss_mb:.0f} MB")
-        browser.close()
-
-    def line(values: list[float], unit: str) -> str:
-        med = statistics.median(values)
-        return f"{med:.0f} {unit} (range {min(values):.0f}-{max(values):.0f}, n={len(values)})"
-
-    print(f"new tab to its first frame, with the spare: {line(with_spare, 'ms')}")
-    print(f"new tab to its first frame, without:        {line(without, 'ms')}")
-    print(f"one session's RSS after its first frame:    {line(rss, 'MB')}")
-    return 0
+    return asyncio.run(main_async(args))
 
 
 if __name__ == "__main__":

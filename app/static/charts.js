@@ -34,6 +34,7 @@ window.trame.utils.lmapdCharts = (() => {
     times.loaded = performance.now();
     const found = {};
     window.trame_plotly.install({ component: (name, def) => { found[name] = def; } });
+    if (!found.TramePlotly) throw new Error("trame-plotly's bundle registered no TramePlotly");
     setTimeout(() => { times.mounted = performance.now(); }, 0);  // after Vue's render of them
     return found.TramePlotly;
   };

@@ -111,6 +111,26 @@ def test_the_page_loads_its_files_after_the_widget_libraries_styles():
     assert any("vuetify" in s for s in styles[: -len(module["styles"])])
 
 
+def test_plotly_is_served_but_loaded_by_the_charts_loader_not_before_the_page_mounts():
+    from trame.app import get_server
+    from trame_plotly import module as plotly_module
+
+    from app.ui import charts
+    from app.ui.layout import build_layout
+
+    server = get_server("charts-defer-test", client_type="vue3")
+    build_layout(server)
+    (folder,) = plotly_module.serve
+    assert server.serve[folder] == plotly_module.serve[folder]  # still served
+    assert not set(plotly_module.scripts) & set(server.state.trame__scripts)
+    plugins = [u if isinstance(u, str) else u[0] for u in server.state.trame__vue_use]
+    assert charts.PLUGIN not in plugins
+    (loader,) = [
+        u for u in server.state.trame__vue_use if not isinstance(u, str) and u[0] == charts.LOADER
+    ]
+    assert loader[1] == {"scripts": list(plotly_module.scripts)}
+
+
 CURSOR_HARNESS = r"""
 const fs = require('fs');
 const vm = require('vm');

@@ -33,7 +33,6 @@ window.trame.utils.lmapd = {
       const kind = key[0] === 'p' ? 'preview' : 'preset', t = performance.now();
       (window.lmapdFrames = window.lmapdFrames || []).push({ key, kind, applied, t });
       window.trame.trigger('frame_shown', [key]);
-      window.dispatchEvent(new CustomEvent('lmapd-frame-shown', { detail: key }));  // charts.js
     }));
     setTimeout(() => onScreen(8), 0);
   },

@@ -3,11 +3,12 @@
 The charts are trame-plotly's (``trame.widgets.plotly.Figure``, the Vue component TramePlotly).
 Its module puts plotly's whole bundle (4.6 MB) among the scripts a page loads before it mounts,
 and evaluating it was the largest single cost of a new tab's first picture (about 0.6 s of the
-page's CPU here, docs/performance.md). :func:`defer_plotly` takes that script and its Vue plugin
+page's CPU here, docs/serving.md). :func:`defer_plotly` takes that script and its Vue plugin
 off the page's start-up lists (the folder stays served) and has the page's own plugin,
 ``trame.utils.lmapdCharts`` (``app/static/charts.js``), register TramePlotly as an async
-component that loads the script once the first frame is on screen. The charts are the same
-component with the same properties and events; they appear a moment after the first frame.
+component that loads the script once the first frame is on screen and the server has no other
+on its way (such as the chosen preset's after a preview). The charts are the same component with
+the same properties and events; they appear a moment after the first frame.
 
 Checked against trame-plotly 3.1.2 (its module: ``scripts``, ``vue_use = ["trame_plotly"]``, the
 UMD global ``trame_plotly`` whose ``install`` registers TramePlotly) and trame-server 4.1

@@ -24,8 +24,8 @@ import os
 import signal
 import sys
 
-from app.server.launcher import ZYGOTE_READY as READY
-from app.server.launcher import token_digest as digest
+from app.server.children import ZYGOTE_READY as READY
+from app.server.children import token_digest as digest
 
 PR_SET_PDEATHSIG = 1  # prctl(2)
 

@@ -1,0 +1,81 @@
+"""The launcher's limits (``Caps``) and the memory figures its default session cap is derived from:
+what one session process holds, started afresh or forked from the preloaded parent."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import psutil
+
+MIB = 2**20
+# One session process's resident memory after its first frame with the paper scene at 256 x 256
+# (354-370 MB, median 357 MB, with its preview's stages, scripts/bench_sessions.py, 2026-11-25);
+# the default session cap is derived from it.
+SESSION_RSS_BYTES = 370 * MIB
+# A session forked from the zygote (the default on Linux): 30 such sessions and their parent held
+# 3,018 MB of proportional set size after each one's first 256 x 256 frame (101 MB a session,
+# the parent's share included; 7,112 MB as processes of their own; they share the parent's
+# target stage: scripts/bench_session_memory.py, 2026-11-26); counted at 128 MB.
+FORKED_SESSION_BYTES = 128 * MIB
+MAX_DEFAULT_SESSIONS = 30  # a class
+MEMORY_SHARE = 0.75  # of the memory available at start, for the children together
+
+
+@dataclasses.dataclass(frozen=True)
+class Caps:
+    """The launcher's limits.
+
+    max_sessions : sessions open at once; the warm spare counts too (at most this many processes)
+    memory_cap_bytes : the children's total memory that no new session may take beyond [bytes]
+    idle_s : a session whose websocket has been closed this long is stopped [s]
+    spare : keep one process started ahead
+    start_timeout_s : a process that has not listened after this long is given up [s]
+    input_idle_s : a session whose page has sent nothing this long is stopped, socket or not [s]
+    max_age_s : a session this old is stopped [s]
+    per_client : sessions of one browser (its client cookie); a new one ends its oldest
+    per_address : sessions of one client address other than loopback (a reverse proxy on this
+        machine is loopback) [0: no limit]
+    sockets_per_session : websockets open at once on one session
+    session_bytes : what a session is counted at in the memory cap until it measures more [bytes]
+    """
+
+    max_sessions: int
+    memory_cap_bytes: int
+    idle_s: float = 60.0
+    spare: bool = True
+    start_timeout_s: float = 120.0
+    input_idle_s: float = 1800.0
+    max_age_s: float = 8 * 3600.0
+    per_client: int = 3
+    per_address: int = 6
+    sockets_per_session: int = 4
+    session_bytes: int = SESSION_RSS_BYTES
+
+
+def default_caps(
+    available_bytes: int | None = None,
+    session_rss_bytes: int = SESSION_RSS_BYTES,
+    max_sessions: int | None = None,
+    memory_cap_bytes: int | None = None,
+    idle_s: float = 60.0,
+    spare: bool = True,
+    **more,
+) -> Caps:
+    """The caps for this machine: the children may use ``MEMORY_SHARE`` of the memory available
+    now [bytes], and as many sessions as fit in it at ``session_rss_bytes`` each (at least 1, at
+    most ``MAX_DEFAULT_SESSIONS``); explicit values win; ``more``: the other fields of Caps."""
+    if available_bytes is None:
+        available_bytes = int(psutil.virtual_memory().available)
+    if memory_cap_bytes is None:
+        memory_cap_bytes = int(MEMORY_SHARE * available_bytes)
+    if max_sessions is None:
+        fits = memory_cap_bytes // max(1, session_rss_bytes)
+        max_sessions = int(min(MAX_DEFAULT_SESSIONS, max(1, fits)))
+    return Caps(
+        max(1, max_sessions),
+        max(0, memory_cap_bytes),
+        idle_s,
+        spare,
+        session_bytes=session_rss_bytes,
+        **more,
+    )

@@ -1,0 +1,70 @@
+"""What the launcher reads off a request, and the addresses and cookie names it makes: which
+session a path names (``SESSION_ID``) and whether the rest of it stays inside (``safe_rest``),
+whether a request to the door is a tab's navigation (``navigation_problem``), the names of a
+session's and a browser's cookies, and the launcher's root with a request's settings."""
+
+from __future__ import annotations
+
+import re
+from urllib.parse import quote
+
+from aiohttp import web
+
+from app.server import security
+
+CLIENT_ID = re.compile(r"^[A-Za-z0-9_-]{16,64}$")
+SESSION_ID = re.compile(r"^/s/(?P<id>[A-Za-z0-9_-]{1,64})(?P<rest>/.*)?$")
+
+
+def navigation_problem(headers) -> str | None:
+    """None if a request to the door is a browser's navigation of a tab (or comes from a client
+    that sends no fetch metadata, such as an older browser or a script), else why not: a
+    subresource (``<img>``, ``fetch``), a frame, or a prefetch."""
+    mode = headers.get("Sec-Fetch-Mode", "").lower()
+    if mode and mode != "navigate":
+        return f"a {security.echo(mode)} request, not a navigation"
+    dest = headers.get("Sec-Fetch-Dest", "").lower()
+    if dest and dest != "document":
+        return f"a request for a {security.echo(dest)}, not a page"
+    purpose = " ".join(headers.get(k, "") for k in ("Sec-Purpose", "Purpose", "X-Moz")).lower()
+    if "prefetch" in purpose or "prerender" in purpose or "preview" in purpose:
+        return "a prefetch"
+    return None
+
+
+def session_cookie(session_id: str) -> str:
+    """The name of the cookie that binds a session to its browser."""
+    return f"lmapd-session-{session_id}"
+
+
+def client_cookie(request: web.Request) -> str:
+    """The name of the cookie that names a browser to the launcher at the request's port."""
+    return f"lmapd-client-{security._local_port(request)}"
+
+
+def safe_rest(rest: str) -> bool:
+    """A path inside a session that stays inside it: no dot segments, no backslashes, no
+    empty segments, no control characters."""
+    if not rest.startswith("/") or "\\" in rest or "//" in rest:
+        return False
+    if any(ord(c) < 32 or ord(c) == 127 for c in rest):
+        return False
+    return not any(seg in (".", "..") for seg in rest.split("/"))
+
+
+def root_link(request: web.Request) -> str:
+    """The launcher's root with the request's settings (its token stays in the cookie)."""
+    query = [(k, v) for k, v in request.query.items() if k != "token"]
+    return "/" + ("?" + query_string(query) if query else "")
+
+
+def query_string(pairs) -> str:
+    return "&".join(f"{quoted(k)}={quoted(v)}" for k, v in pairs)
+
+
+def quoted(text: str) -> str:
+    return quote(text, safe="")
+
+
+def redirect(location: str) -> web.Response:
+    return web.Response(status=302, headers={"Location": location, "Cache-Control": "no-store"})

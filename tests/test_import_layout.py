@@ -223,6 +223,21 @@ def test_lmapd_help_does_not_load_the_imaging_chain():
     assert done.stdout.strip() == "[]"
 
 
+def test_the_zygote_loads_no_framework_before_its_version_check():
+    """``python -m app.server.zygote`` checks the framework releases in its ``__main__`` block:
+    its module-level imports (the lines it shares with the launcher) load no trame, wslink or
+    aiohttp, so that no patched framework module is imported before that check."""
+    code = (
+        "import sys, app.server.zygote; "
+        "print(sorted(m for m in sys.modules if m.partition('.')[0] in "
+        "('trame', 'trame_server', 'wslink', 'aiohttp')))"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT
+    )
+    assert done.stdout.strip() == "[]"
+
+
 def test_the_public_names_are_the_lazy_exports_and_resolve():
     import simcore
 

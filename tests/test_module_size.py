@@ -1,5 +1,7 @@
-"""No module of the library over 500 lines unless its docstring says why: a line of it that starts
-with "Over 500 lines:" (a module that long mixes concerns more often than not)."""
+"""No module of the library, nor of the app's server (app/server/), over 500 lines unless its
+docstring says why: a line of it that starts with "Over 500 lines:" (a module that long mixes
+concerns more often than not). The rest of the app is not held to it yet (app/logic/controller.py
+is longer)."""
 
 from __future__ import annotations
 
@@ -36,3 +38,7 @@ def test_the_rule_finds_a_long_module_without_its_reason_and_accepts_one_with_it
 
 def test_no_module_of_simcore_is_over_500_lines_without_saying_why():
     assert oversized(ROOT / "simcore") == []
+
+
+def test_no_module_of_the_app_server_is_over_500_lines_without_saying_why():
+    assert oversized(ROOT / "app" / "server") == []

@@ -70,7 +70,8 @@ def pss_mb(pid: int) -> float:
 
 
 async def one_mode(fork: bool, n: int) -> dict:
-    args = ("--no-spare", "--max-sessions", str(n + 2)) + (("--fork-sessions",) if fork else ())
+    mode = "--fork-sessions" if fork else "--process-sessions"
+    args = ("--no-spare", "--max-sessions", str(n + 2), mode)
     with app_process(sessions=True, app_args=args) as running:
         opened, times = [], []
         for _ in range(n):

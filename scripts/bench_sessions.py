@@ -9,12 +9,12 @@ open (paper scene, 256 x 256, 1280 x 720 pages).
 For each repeat, mode (sessions forked from the preloaded parent, the default on Linux, or a
 process each) and count of tabs: a launcher starts, its spare session is left to get ready,
 ``--open`` sessions are opened without a browser (as bench_session_memory.py does, each to its
-first frame), then the tabs open the printed address at the same moment, each in a browser
-context of its own (a student's browser). Times are wall-clock seconds from that moment, measured
-here: the door's first answer (the response's headers and first words) and the first frame
-painted (the page logs it: window.lmapdFrames). Medians with their range over every tab of every
-repeat are printed; the one-minute load average is printed beside them (the machine must be quiet
-for these times to mean anything).
+first frame), a browser context and page are opened for each tab (a student's browser, open
+before the class starts), then the tabs open the printed address at the same moment. Times are
+wall-clock seconds from that moment, measured here: the door's first answer (the response's
+headers and first words) and the first frame painted (the page logs it: window.lmapdFrames).
+Medians with their range over every tab of every repeat are printed; the one-minute load average
+is printed beside them (the machine must be quiet for these times to mean anything).
 """
 
 from __future__ import annotations
@@ -64,17 +64,19 @@ async def _spare_ready(launcher_pid: int) -> None:
     await asyncio.sleep(2.0)
 
 
-async def _one_tab(browser, url: str, t0: float) -> tuple[float, float]:
-    """(s to the door's first answer, s to the first frame painted), both from ``t0``."""
+async def _open_page(browser):
+    """A student's browser, open before the class starts: its own context (cookies) and page."""
     context = await browser.new_context(viewport={"width": 1280, "height": 720})
-    page = await context.new_page()
+    return context, await context.new_page()
+
+
+async def _one_tab(page, url: str, t0: float) -> tuple[float, float]:
+    """(s to the door's first answer, s to the first frame painted), both from ``t0``."""
     answered: list[float] = []
     page.on("response", lambda _r: answered or answered.append(time.perf_counter() - t0))
     await page.goto(url, wait_until="commit")
     await page.wait_for_function(JS_FRAMES + " > 0", timeout=FRAME_WAIT_S * 1000)
-    painted = time.perf_counter() - t0
-    await context.close()
-    return answered[0] if answered else float("nan"), painted
+    return answered[0] if answered else float("nan"), time.perf_counter() - t0
 
 
 async def one_round(browser, fork: bool, tabs: int, n_open: int) -> list[tuple[float, float]]:
@@ -86,8 +88,11 @@ async def one_round(browser, fork: bool, tabs: int, n_open: int) -> list[tuple[f
         for _ in range(n_open):
             client, _page, _s = await open_session(running)
             held.append(client)
+        opened = [await _open_page(browser) for _ in range(tabs)]
         t0 = time.perf_counter()
-        times = await asyncio.gather(*(_one_tab(browser, running.url, t0) for _ in range(tabs)))
+        times = await asyncio.gather(*(_one_tab(page, running.url, t0) for _, page in opened))
+        for context, _ in opened:
+            await context.close()
         for client in held:
             await client.close()
     return list(times)

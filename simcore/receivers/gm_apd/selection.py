@@ -144,6 +144,7 @@ def selection_shifts(
 
 
 NODES = np.geomspace(0.05, MU_MAX, 128)  # expected counts at which the shifts are summed
+NODES_AT_ONCE = 8  # nodes whose detected pixels' medians are found together (memory: see below)
 
 
 @lru_cache(maxsize=64)
@@ -171,9 +172,13 @@ def _shift_nodes(table: Selection, n_pulses: int, k_t: float) -> tuple[np.ndarra
     flat_err, flat_m = flat_err[order], flat_m[order]
     node_median = np.zeros(len(NODES))
     if len(flat_err):
-        cw = np.cumsum(w_m[:, flat_m] / table.draws[flat_m], axis=1)
-        i = np.minimum((cw < 0.5 * cw[:, -1:]).sum(axis=1), len(flat_err) - 1)
-        node_median = flat_err[i]
+        # a few nodes at a time: every node's weights of every detected draw at once took 250 MB
+        # (128 nodes x ~245,000 draws, twice) on top of a frame's own memory
+        draws_m = table.draws[flat_m]
+        for g in range(0, len(NODES), NODES_AT_ONCE):
+            cw = np.cumsum(w_m[g : g + NODES_AT_ONCE, flat_m] / draws_m, axis=1)
+            i = np.minimum((cw < 0.5 * cw[:, -1:]).sum(axis=1), len(flat_err) - 1)
+            node_median[g : g + NODES_AT_ONCE] = flat_err[i]
     good = seen > 1e-6  # below: no pixel of the frame is detected
     return (
         np.log(NODES),

@@ -21,6 +21,9 @@ from app.state import SPECS, STATE_KEYS, Controls, sanitize_controls
 from support.launch import JS_FRAMES, JS_STATE, set_field, wait_first_frame, wait_settled
 
 SLIDERS = tuple(key for key in SPECS if key != "seed")  # the seed has a field, no slider
+# the sliders every page shows; the others belong to a choice (the manual Sun, the filter, the
+# Geiger-mode receiver) and are built only while it is chosen
+ALWAYS_SHOWN = ("pitch_deg", "azimuth_deg", "distance_m", "pixels", "pulse_energy_mj", "tnr")
 # keys pressed on the sliders' thumbs
 UP, DOWN = "ArrowRight", "ArrowLeft"
 
@@ -28,6 +31,7 @@ UP, DOWN = "ArrowRight", "ArrowLeft"
 @dataclass
 class SoakReport:
     changes_sent: int = 0
+    n_sliders: int = 0
     frames_drawn: int = 0
     burst_s: float = 0.0
     settle_s: float = 0.0
@@ -57,7 +61,8 @@ class SoakReport:
     def lines(self) -> list[str]:
         return [
             f"slider changes sent: {self.changes_sent} in {self.burst_s:.1f} s "
-            f"({self.changes_sent / max(self.burst_s, 1e-9):.0f}/s) across {len(SLIDERS)} sliders",
+            f"({self.changes_sent / max(self.burst_s, 1e-9):.0f}/s) "
+            f"across {self.n_sliders} sliders",
             f"frames drawn by the page during the burst and settling: {self.frames_drawn}",
             f"settled {self.settle_s:.1f} s after the last change",
             f"server alive afterwards: {'yes' if self.server_alive else 'NO'}",
@@ -125,16 +130,28 @@ def expected_points(page) -> tuple[int, int, int, int]:
     return int(s["n_points"]), int(s["n_target_points"]), int(s["n_outliers"]), result.pixels
 
 
-def slider_burst(page, n_changes: int) -> None:
-    """``n_changes`` keyboard steps on the sliders' thumbs, round robin, no pause between."""
-    thumbs = [page.locator(f".slider-{key} .v-slider-thumb").first for key in SLIDERS]
-    handles = [thumb.element_handle() for thumb in thumbs]
+def shown_sliders(page) -> tuple[str, ...]:
+    """The sliders on the page now (every one of ALWAYS_SHOWN among them)."""
+    shown = tuple(k for k in SLIDERS if page.locator(f".slider-{k} .v-slider-thumb").count())
+    missing = [k for k in ALWAYS_SHOWN if k not in shown]
+    assert not missing, f"sliders missing from the page: {missing}"
+    return shown
+
+
+def slider_burst(page, n_changes: int) -> int:
+    """``n_changes`` keyboard steps on the thumbs of the sliders shown, round robin, no pause
+    between; returns how many sliders took them."""
+    sliders = shown_sliders(page)
+    handles = [
+        page.locator(f".slider-{key} .v-slider-thumb").first.element_handle() for key in sliders
+    ]
     for i in range(n_changes):
-        k = i % len(SLIDERS)
-        visit = i // len(SLIDERS)
+        k = i % len(sliders)
+        visit = i // len(sliders)
         # the pixel count goes up and down (its frames stay cheap), the others mostly up
-        backwards = visit % 2 == 1 if SLIDERS[k] == "pixels" else visit % 3 == 2
+        backwards = visit % 2 == 1 if sliders[k] == "pixels" else visit % 3 == 2
         handles[k].press(DOWN if backwards else UP)
+    return len(sliders)
 
 
 def run_soak(browser, url: str, n_changes: int = 300, settle_timeout_s: float = 60.0) -> SoakReport:
@@ -155,7 +172,7 @@ def run_soak(browser, url: str, n_changes: int = 300, settle_timeout_s: float = 
         report.rss_before_mb = rss_mb(pid)
         frames0 = page.evaluate(JS_FRAMES)
         t0 = time.perf_counter()
-        slider_burst(page, n_changes)
+        report.n_sliders = slider_burst(page, n_changes)
         report.changes_sent = n_changes
         report.burst_s = time.perf_counter() - t0
         t1 = time.perf_counter()

@@ -4,6 +4,8 @@ shows a message; "Use built-in MRO" brings the MRO back."""
 
 from __future__ import annotations
 
+import time
+
 import pytest
 import trimesh
 from support.launch import JS_STATE, wait_first_frame, wait_settled
@@ -28,6 +30,9 @@ def test_a_mesh_uploaded_from_the_page_becomes_the_target(page, app_url, tmp_pat
 
     page.goto(app_url)
     wait_first_frame(page)
+    wait_settled(page)
+    page.locator(".reset-button").click()  # the paper scene, whatever an earlier test left
+    time.sleep(0.3)
     wait_settled(page)
     page.locator(".upload-panel .v-expansion-panel-title").click()
     file_input = page.locator(".upload-file input[type=file]")

@@ -203,6 +203,9 @@ def run_soak(browser, url: str, n_changes: int = 300, settle_timeout_s: float = 
         finally:
             second.close()
         report.server_alive = report.server_alive and alive(pid)
+        page.locator(".reset-button").click()  # leave the shared scene as the next test expects
+        time.sleep(0.3)
+        wait_settled(page, settle_timeout_s)
     finally:
         first.close()
     report.elapsed_s = time.perf_counter() - t_start

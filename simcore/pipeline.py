@@ -72,7 +72,7 @@ class Pipeline:
         stage whose key differs is computed again as usual. Without ``scene`` only the stages
         this pipeline has not cached are taken; with it, every one of ``other``'s that is
         ``scene``'s (its inputs unchanged) and not already this pipeline's."""
-        keys = self._keys(scene) if scene is not None else {}
+        keys = self._keys(scene, upto=stages) if scene is not None else {}
         for name in stages:
             theirs = other._cache.get(name)
             if theirs is None:
@@ -85,11 +85,18 @@ class Pipeline:
                 self._cache[name] = theirs
 
     @staticmethod
-    def _keys(scene: Scene) -> dict[str, tuple]:
-        """Every stage's cache key for ``scene`` (its reads and its upstream stages' keys)."""
+    def _keys(scene: Scene, upto: tuple[str, ...] | None = None) -> dict[str, tuple]:
+        """The cache key of each stage of the chain for ``scene`` (its reads and its upstream
+        stages' keys), in order; with ``upto``, only as far as the last of those stages (a
+        :meth:`run` computes the same keys as it goes)."""
         keys: dict[str, tuple] = {}
+        wanted = set(upto) if upto is not None else None
         for stage in CHAIN:
             keys[stage.name] = (stage.reads(scene), *(keys[u] for u in stage.upstream))
+            if wanted is not None:
+                wanted.discard(stage.name)
+                if not wanted:
+                    break
         return keys
 
     def run(
@@ -137,25 +144,19 @@ class Pipeline:
     def stages_to_run(self, scene: Scene) -> list[str]:
         """The stages a :meth:`run` of ``scene`` would compute (the others come from the cache),
         in chain order; nothing is computed here."""
-        keys: dict[str, tuple] = {}
         names = []
-        for stage in CHAIN:
-            keys[stage.name] = (stage.reads(scene), *(keys[u] for u in stage.upstream))
-            cached = self._cache.get(stage.name)
-            if cached is None or cached[0] != keys[stage.name]:
-                names.append(stage.name)
+        for name, key in self._keys(scene).items():
+            cached = self._cache.get(name)
+            if cached is None or cached[0] != key:
+                names.append(name)
         return names
 
     def cached(self, name: str, scene: Scene) -> Any:
         """Stage ``name``'s cached output if it is ``scene``'s (its inputs unchanged), else None;
         nothing is computed (a caller may look at a finished stage before the next runs)."""
-        keys: dict[str, tuple] = {}
-        for stage in CHAIN:
-            keys[stage.name] = (stage.reads(scene), *(keys[u] for u in stage.upstream))
-            if stage.name == name:
-                hit = self._cache.get(name)
-                return hit[1] if hit is not None and hit[0] == keys[name] else None
-        return None
+        key = self._keys(scene, upto=(name,)).get(name)
+        hit = self._cache.get(name)
+        return hit[1] if key is not None and hit is not None and hit[0] == key else None
 
     def _output(self, stage: Stage, scene: Scene, key: tuple, outputs: dict, should_stop):
         """The stage's output (cached under ``key``, or computed) and its compute time [s]."""

@@ -98,9 +98,13 @@ class TargetModel:
     @property
     def face_material_library(self) -> np.ndarray:
         """(n_faces,) int32 index into materials.MATERIAL_NAMES (stable across targets)."""
+        return self.part_material_library[self.face_part]
+
+    @property
+    def part_material_library(self) -> np.ndarray:
+        """(n_parts,) int32 index into materials.MATERIAL_NAMES of each part's material."""
         names = list(LIBRARY)
-        lookup = np.array([names.index(m) for m in self.part_materials], np.int32)
-        return lookup[self.face_part]
+        return np.array([names.index(m) for m in self.part_materials], np.int32)
 
     @property
     def material_names(self) -> tuple[str, ...]:

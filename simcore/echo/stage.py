@@ -146,9 +146,7 @@ def _echo_block(
     bounds = np.linspace(0, len(rows), parts + 1).astype(int)
     # each part's material (its index in materials.MATERIAL_NAMES), the faces' looked up in the
     # chunks: model.face_material_library maps every face, 0.4 ms a frame on this thread alone
-    part_material = np.array(
-        [materials.MATERIAL_NAMES.index(m) for m in model.part_materials], np.int32
-    )
+    part_material = model.part_material_library
     face_part = np.asarray(model.face_part)
     chunks = parallel.map_threads(
         lambda part: _elements(scene, (part_material, face_part), block, part, shape),

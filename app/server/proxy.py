@@ -68,7 +68,9 @@ async def websocket(
     """Join a page's websocket to its session's process until either closes (counted in the
     session's ``n_sockets``; its page's frames are the session's input)."""
     child.n_sockets += 1
-    page = web.WebSocketResponse(max_msg_size=FRAME_BYTES, heartbeat=30.0)
+    page = web.WebSocketResponse(
+        max_msg_size=FRAME_BYTES, heartbeat=30.0, compress=deflates(request)
+    )
     upstream = None
     try:
         try:
@@ -101,6 +103,19 @@ async def websocket(
         if page.prepared:
             await page.close()
     return page
+
+
+def deflates(request: web.Request) -> bool:
+    """Whether a page's websocket is compressed (permessage-deflate, if its browser offers it):
+    only for a page on another machine. On this one, deflating a first state of 3.8 MB (the
+    paper scene at 256 x 256 pixels) to 1.5 MB cost the launcher 0.21 s of CPU at zlib's default
+    level and saved nothing; over a network it sends 2.5 times fewer bytes. A reverse proxy on
+    this machine passes other machines' pages on (it says so in ``X-Forwarded-For`` or
+    ``Forwarded``): those are compressed."""
+    headers = request.headers
+    if "X-Forwarded-For" in headers or "Forwarded" in headers:
+        return True
+    return (request.remote or "") not in security.LOOPBACK_NAMES
 
 
 async def _pump(source, sink, child: Child | None = None) -> None:

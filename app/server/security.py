@@ -32,7 +32,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from app.server import connections
+from app.server import connections, index_page
 from app.server.budget import (
     MAX_MESSAGE_BYTES,
     MIB,
@@ -130,6 +130,8 @@ def install(
     def bind(web_app) -> None:
         connections.guard_app(web_app.app)  # idle and partial connections closed
         web_app.app.middlewares.append(door.middleware)
+        # after the door: the page itself needs the token too
+        web_app.app.middlewares.append(index_page.middleware_for(server.state))
 
     connections.guard_wslink_sites()
     server.add_protocol_to_configure(configure)

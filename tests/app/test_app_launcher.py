@@ -461,6 +461,30 @@ def test_the_websocket_is_proxied_with_its_origin_checked_and_its_frames_bounded
     run(body)
 
 
+def test_a_page_on_this_machine_gets_its_frames_uncompressed_one_from_the_network_deflated():
+    """permessage-deflate only where it saves something: a page on this machine is answered
+    without it, a page that a reverse proxy forwards (X-Forwarded-For or Forwarded) with it."""
+
+    async def body():
+        async with serving(caps()) as (_launcher, base, client):
+            session = await new_session(client, base)
+            url = f"ws://{base[7:]}{session.path}ws"
+            own = {"Origin": base, **session.headers(base)}
+            for forwarded, deflated in (
+                ({}, False),
+                ({"X-Forwarded-For": "192.0.2.7"}, True),
+                ({"Forwarded": "for=192.0.2.7"}, True),
+            ):
+                ws = await client.ws_connect(url, headers={**own, **forwarded}, compress=15)
+                assert bool(ws.compress) is deflated, forwarded
+                await ws.send_bytes(b"a" * 10_000)
+                answer = await asyncio.wait_for(ws.receive(), WAIT_S)
+                assert answer.data == b"a" * 10_000  # the frames pass either way
+                await ws.close()
+
+    run(body)
+
+
 def test_idle_sessions_end_and_dead_ones_are_forgotten_and_close_stops_all():
     async def body():
         async with serving(caps()) as (launcher, base, client):

@@ -1,0 +1,65 @@
+"""The page's first answer (app.server.index_page): trame's index.html with a preload link for
+each style sheet and script the page's state names, so the browser fetches them while the page
+connects; nothing else of trame's page changes."""
+
+from __future__ import annotations
+
+import re
+import urllib.request
+
+from test_app_hostile import app, http_get  # noqa: F401  (the module's app server)
+
+from app.server import index_page
+from app.ui import static
+
+INDEX = """<!doctype html>
+<html><head>
+    <script src="vue.global.js"></script>
+    <script type="module" crossorigin src="./assets/index-x.js"></script>
+  </head>
+  <body><div id="app"></div></body></html>
+"""
+LINK = re.compile(r'<link rel="preload" as="(style|script)" href="([^"]*)">')
+
+
+def test_each_style_and_script_gets_a_preload_link_in_the_head_and_the_rest_is_kept(tmp_path):
+    index = tmp_path / "index.html"
+    index.write_text(INDEX)
+    state = {
+        "trame__styles": ["a/one.css", ["b/two.css", {"serial": "x"}]],
+        "trame__scripts": ["c/three.js", "d/f&g.js"],
+    }
+    page = index_page.page_html(state, index)
+    head, body = page.split("</head>")
+    assert LINK.findall(head) == [
+        ("style", "a/one.css"),
+        ("style", "b/two.css"),
+        ("script", "c/three.js"),
+        ("script", "d/f&amp;g.js"),  # escaped
+    ]
+    assert LINK.sub("", page).replace(" ", "").replace("\n", "") == INDEX.replace(" ", "").replace(
+        "\n", ""
+    )
+    assert not LINK.search(body)
+
+
+def test_the_served_page_preloads_the_widget_libraries_and_its_own_files_each_of_which_answers(
+    app,  # noqa: F811
+):
+    status, headers = http_get(app.url)
+    assert status == 200
+    cookie = headers["Set-Cookie"].split(";")[0]
+    request = urllib.request.Request(app.url)
+    with urllib.request.urlopen(request, timeout=30) as response:
+        page = response.read().decode()
+    links = LINK.findall(page.split("</head>")[0])
+    names = [name for _, name in links]
+    own = static.module()
+    for name in (*own["styles"], *own["scripts"]):
+        assert name in names
+    assert any(n.endswith("vuetify3.css") for n in names)
+    assert any(n.endswith("trame-vtk.js") for n in names)
+    assert not any("plotly" in n for n in names)  # loaded after the first frame
+    assert "vue.global.js" in page and "index-" in page  # trame's own page around them
+    for name in names:
+        assert http_get(f"{app.origin}/{name}", {"Cookie": cookie})[0] == 200, name

@@ -9,8 +9,9 @@ open (paper scene, 256 x 256, 1280 x 720 pages).
 For each repeat, mode (sessions forked from the preloaded parent, the default on Linux, or a
 process each) and count of tabs: a launcher starts, its spare session is left to get ready,
 ``--open`` sessions are opened without a browser (as bench_session_memory.py does, each to its
-first frame), a browser context and page are opened for each tab (a student's browser, open
-before the class starts), then the tabs open the printed address at the same moment. Times are
+first frame) and the launcher's processes are left to go quiet (the next spare started), a
+browser context and page are opened for each tab (a student's browser, open before the class
+starts), then the tabs open the printed address at the same moment. Times are
 wall-clock seconds from that moment, measured here: the door's first answer (the response's
 headers and first words) and the first frame painted (the page logs it: window.lmapdFrames).
 Medians with their range over every tab of every repeat are printed; the one-minute load average
@@ -64,6 +65,31 @@ async def _spare_ready(launcher_pid: int) -> None:
     await asyncio.sleep(2.0)
 
 
+def _cpu_s(processes: list[psutil.Process]) -> float:
+    total = 0.0
+    for proc in processes:
+        try:
+            times = proc.cpu_times()
+            total += times.user + times.system
+        except psutil.Error:
+            pass
+    return total
+
+
+async def _settled(launcher_pid: int, quiet_share: float = 0.05, window_s: float = 0.5) -> None:
+    """Wait until the launcher and its processes are quiet: under ``quiet_share`` of one core
+    over ``window_s`` (the open sessions' frames done and the next spare started)."""
+    deadline = time.monotonic() + SPARE_WAIT_S
+    launcher = psutil.Process(launcher_pid)
+    while time.monotonic() < deadline:
+        tree = [launcher, *launcher.children(recursive=True)]
+        before = _cpu_s(tree)
+        await asyncio.sleep(window_s)
+        if _cpu_s(tree) - before < quiet_share * window_s:
+            return
+    raise RuntimeError("the sessions did not settle")
+
+
 async def _open_page(browser):
     """A student's browser, open before the class starts: its own context (cookies) and page."""
     context = await browser.new_context(viewport={"width": 1280, "height": 720})
@@ -88,6 +114,7 @@ async def one_round(browser, fork: bool, tabs: int, n_open: int) -> list[tuple[f
         for _ in range(n_open):
             client, _page, _s = await open_session(running)
             held.append(client)
+        await _settled(running.pid)  # a quiet machine with the sessions open
         opened = [await _open_page(browser) for _ in range(tabs)]
         t0 = time.perf_counter()
         times = await asyncio.gather(*(_one_tab(page, running.url, t0) for _, page in opened))

@@ -2,38 +2,81 @@
 // tell the server (the trigger frame_shown) and keep a log of those times for the benchmark
 // (window.lmapdFrames). On screen: a WebGL canvas reaches the screen in the compositor's commit
 // after vtk.js rendered it (with software WebGL the commit waits for the rendering and reads the
-// canvas back), so the time is taken two animation frames after the views' last render (each
-// render is stamped), not two after the state arrived.
+// canvas back), so the time is taken two animation frames after the views' last render, once
+// each view has rendered at its canvas's present size. The page's first frame is applied while
+// the page mounts, before its views exist; vtk.js first renders a new view empty at 300 x 300
+// pixels, then at its own size with the frame's data (about 0.4 s later in software).
+// Renders are seen at the views' WebGL contexts (vtk.js freezes its own objects): every render
+// clears the canvas first. Frames are logged and reported in the order they were applied.
 // Vue templates cannot reach browser globals, so the helper hangs on trame.utils
 // (app.ui.layout.FRAME_SHOWN calls it when the state's frame_key changes).
-window.trame.utils.lmapd = {
-  lastRender: 0,
-  watchViews() {
-    for (const ref of ['scene_view', 'cloud_view']) {
-      const view = window.trame.refs[ref];
-      const rw = view && view.$ && view.$.provides && view.$.provides.view
-        && view.$.provides.view.renderWindow;
-      if (!rw || rw.lmapdStamped) continue;
-      const render = rw.render;
-      rw.render = (...args) => { this.lastRender = performance.now(); return render(...args); };
-      rw.lmapdStamped = true;
+(() => {
+  // every WebGL canvas's last clear, { t, size }, from the canvas's first context on (this file
+  // is loaded before the page mounts its views)
+  const clears = new WeakMap();
+  const VIEWS = ['scene_view', 'cloud_view'];
+  const MAX_RENDERS = 8, MAX_WAITS = 60;  // pairs of animation frames: bounds only
+  const sizeOf = (canvas) => `${canvas.width}x${canvas.height}`;
+  const getContext = HTMLCanvasElement.prototype.getContext;
+  HTMLCanvasElement.prototype.getContext = function (type, ...rest) {
+    const gl = getContext.call(this, type, ...rest);
+    if (gl && String(type).startsWith('webgl') && !clears.has(this)) {
+      const canvas = this, clear = gl.clear;
+      clears.set(canvas, { t: 0, size: '' });
+      gl.clear = (...args) => {
+        clears.set(canvas, { t: performance.now(), size: sizeOf(canvas) });
+        return clear.apply(gl, args);
+      };
     }
-  },
-  frameShown(key) {
-    if (!key) return;
-    const applied = performance.now();
-    this.watchViews();
-    let mark = applied;
-    const onScreen = (tries) => requestAnimationFrame(() => requestAnimationFrame(() => {
-      if (this.lastRender > mark && tries > 0) {  // a view rendered meanwhile: its commit next
-        mark = performance.now();
-        onScreen(tries - 1);
-        return;
+    return gl;
+  };
+
+  window.trame.utils.lmapd = {
+    pending: [],  // frames applied and not yet reported: { key, applied }
+    // the views' last clears ([] until every view has a context)
+    viewClears() {
+      const found = [];
+      for (const ref of VIEWS) {
+        const view = window.trame.refs[ref];
+        const api = view && view.$ && view.$.provides && view.$.provides.view;
+        const canvas = api && api.openglRenderWindow && api.openglRenderWindow.getCanvas();
+        if (!canvas || !clears.has(canvas)) return [];
+        found.push({ ...clears.get(canvas), now: sizeOf(canvas) });
       }
-      const kind = key[0] === 'p' ? 'preview' : 'preset', t = performance.now();
-      (window.lmapdFrames = window.lmapdFrames || []).push({ key, kind, applied, t });
-      window.trame.trigger('frame_shown', [key]);
-    }));
-    setTimeout(() => onScreen(8), 0);
-  },
-};
+      return found;
+    },
+    frameShown(key) {
+      if (!key) return;
+      const applied = performance.now();
+      this.pending.push({ key, applied });
+      let mark = applied;
+      const onScreen = (renders, waits) => requestAnimationFrame(() => requestAnimationFrame(() => {
+        if (!this.pending.some((f) => f.key === key)) return;  // reported with a newer frame
+        const views = this.viewClears();
+        const unsized = !views.length || views.some((v) => v.size !== v.now);
+        if (unsized && waits > 0) {  // a view not rendered at its size yet
+          onScreen(renders, waits - 1);
+          return;
+        }
+        const last = Math.max(0, ...views.map((v) => v.t));
+        if (last > mark && renders > 0) {  // a view rendered meanwhile: its commit next
+          mark = performance.now();
+          onScreen(renders - 1, waits);
+          return;
+        }
+        this.report(key);
+      }));
+      setTimeout(() => onScreen(MAX_RENDERS, MAX_WAITS), 0);
+    },
+    // report frame ``key`` shown, and the frames applied before it that are still waiting
+    report(key) {
+      const upto = this.pending.findIndex((f) => f.key === key);
+      const t = performance.now();
+      for (const { key: k, applied } of this.pending.splice(0, upto + 1)) {
+        const kind = k[0] === 'p' ? 'preview' : 'preset';
+        (window.lmapdFrames = window.lmapdFrames || []).push({ key: k, kind, applied, t });
+        window.trame.trigger('frame_shown', [k]);
+      }
+    },
+  };
+})();

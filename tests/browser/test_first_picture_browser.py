@@ -16,6 +16,27 @@ pytestmark = pytest.mark.browser
 # own files come to about 2.6 MB; plotly's bundle alone is 4.6 MB.
 SCRIPT_BYTES_BEFORE_FIRST_FRAME = 3_500_000
 
+# every WebGL clear, logged by its own hook at the prototype (installed before the page's files)
+CLEAR_LOG = """(() => {
+  window.clearLog = [];
+  const clear = WebGL2RenderingContext.prototype.clear;
+  WebGL2RenderingContext.prototype.clear = function (...args) {
+    window.clearLog.push({ canvas: this.canvas, t: performance.now(),
+                           size: `${this.canvas.width}x${this.canvas.height}` });
+    return clear.apply(this, args);
+  };
+})()"""
+VIEW_CLEARS = """() => {
+  const shown = window.lmapdFrames[0].t;
+  return ['scene_view', 'cloud_view'].map((ref) => {
+    const canvas = window.trame.refs[ref].$.provides.view.openglRenderWindow.getCanvas();
+    const size = `${canvas.width}x${canvas.height}`;
+    const mine = window.clearLog.filter((c) => c.canvas === canvas);
+    return { size, sizes: mine.map((c) => c.size),
+             drawnBefore: mine.some((c) => c.size === size && c.t <= shown) };
+  });
+}"""
+
 RESOURCES = """() => performance.getEntriesByType('resource')
   .filter((r) => r.initiatorType === 'script' || r.name.endsWith('.js'))
   .map((r) => ({ name: r.name, start: r.startTime, bytes: r.encodedBodySize }))"""
@@ -51,3 +72,25 @@ def test_a_choices_own_controls_are_built_only_once_chosen(page, app_url):
     page.locator(".receiver-lm").click()
     page.locator(".gm-controls").wait_for(state="detached")
     wait_settled(page)
+
+
+def test_the_first_frame_is_shown_only_after_each_view_drew_it_at_its_size(page, app_url):
+    """A page opened on a scene whose frame is ready gets that frame while it mounts, before its
+    views exist; vtk.js first renders a new view empty at 300 x 300 pixels, then at its own
+    size with the frame's data. The frame is logged (and reported to the server's pacing) after
+    both views drew it at their size (app/static/frame.js), never after the empty renders."""
+    page.goto(app_url)
+    wait_first_frame(page)
+    wait_settled(page)
+    other = page.context.new_page()  # a second tab: the scene's frame is ready
+    try:
+        other.add_init_script(CLEAR_LOG)
+        other.goto(app_url)
+        wait_first_frame(other)
+        first = other.evaluate("() => window.lmapdFrames[0]")
+        assert first["key"][0] == "g" and first["applied"] < first["t"], first
+        for view in other.evaluate(VIEW_CLEARS):
+            assert view["size"] != "300x300" and "300x300" in view["sizes"], view
+            assert view["drawnBefore"], view
+    finally:
+        other.close()

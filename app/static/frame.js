@@ -7,7 +7,8 @@
 // the page mounts, before its views exist; vtk.js first renders a new view empty at 300 x 300
 // pixels, then at its own size with the frame's data (about 0.4 s later in software).
 // Renders are seen at the views' WebGL contexts (vtk.js freezes its own objects): every render
-// clears the canvas first. Frames are logged and reported in the order they were applied.
+// clears the canvas first. Frames are logged and reported in the order they were applied. Once
+// the first is on screen the drawer's controls are built (client state controls_ready).
 // Vue templates cannot reach browser globals, so the helper hangs on trame.utils
 // (app.ui.layout.FRAME_SHOWN calls it when the state's frame_key changes).
 (() => {
@@ -16,6 +17,13 @@
   const clears = new WeakMap();
   const VIEWS = ['scene_view', 'cloud_view'];
   const MAX_RENDERS = 8, MAX_WAITS = 60;  // pairs of animation frames: bounds only
+  // The drawer's controls are built once the first frame is on screen (app.ui.controls), or
+  // at the latest this long after the page loads (a page whose frame does not come) [s].
+  const CONTROLS_LATEST_S = 4;
+  const controlsReady = () => {
+    if (!window.trame.state.get('controls_ready')) window.trame.state.set('controls_ready', true);
+  };
+  setTimeout(controlsReady, CONTROLS_LATEST_S * 1000);
   const sizeOf = (canvas) => `${canvas.width}x${canvas.height}`;
   const getContext = HTMLCanvasElement.prototype.getContext;
   HTMLCanvasElement.prototype.getContext = function (type, ...rest) {
@@ -77,6 +85,7 @@
         (window.lmapdFrames = window.lmapdFrames || []).push({ key: k, kind, applied, t });
         window.trame.trigger('frame_shown', [k]);
       }
+      setTimeout(controlsReady, 0);  // after this frame's commit
     },
   };
 })();

@@ -169,8 +169,10 @@ JS_STATE = "(name) => window.trame.state.get(name)"
 
 
 def wait_first_frame(page, timeout_s: float = 90.0) -> None:
-    """Wait until the page has drawn its first simulated frame."""
+    """Wait until the page has drawn its first simulated frame and built its controls (they
+    come right after it: app/static/frame.js)."""
     page.wait_for_function(JS_FRAMES + " > 0", timeout=timeout_s * 1000)
+    page.wait_for_selector(".controls", state="attached", timeout=timeout_s * 1000)
 
 
 def wait_settled(page, timeout_s: float = 60.0) -> None:

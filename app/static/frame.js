@@ -8,7 +8,7 @@
 // pixels, then at its own size with the frame's data (about 0.4 s later in software).
 // Renders are seen at the views' WebGL contexts (vtk.js freezes its own objects): every render
 // clears the canvas first. Frames are logged and reported in the order they were applied. Once
-// the first is on screen the drawer's controls are built (client state controls_ready).
+// the first is on screen the drawer's controls are built (trame.utils.lmapd.page.controls).
 // Vue templates cannot reach browser globals, so the helper hangs on trame.utils
 // (app.ui.layout.FRAME_SHOWN calls it when the state's frame_key changes).
 (() => {
@@ -18,11 +18,12 @@
   const VIEWS = ['scene_view', 'cloud_view'];
   const MAX_RENDERS = 8, MAX_WAITS = 60;  // pairs of animation frames: bounds only
   // The drawer's controls are built once the first frame is on screen (app.ui.controls), or
-  // at the latest this long after the page loads (a page whose frame does not come) [s].
+  // at the latest this long after the page loads (a page whose frame does not come) [s]. The
+  // flag is the page's own, never the server's state: once set it stays (a state the server
+  // sends again, as after a reconnection, cannot take the controls away).
   const CONTROLS_LATEST_S = 4;
-  const controlsReady = () => {
-    if (!window.trame.state.get('controls_ready')) window.trame.state.set('controls_ready', true);
-  };
+  const page = window.Vue.reactive({ controls: false });
+  const controlsReady = () => { page.controls = true; };
   setTimeout(controlsReady, CONTROLS_LATEST_S * 1000);
   const sizeOf = (canvas) => `${canvas.width}x${canvas.height}`;
   const getContext = HTMLCanvasElement.prototype.getContext;
@@ -40,6 +41,7 @@
   };
 
   window.trame.utils.lmapd = {
+    page,  // { controls }: read by the drawer's template (app.ui.controls.CONTROLS_READY)
     pending: [],  // frames applied and not yet reported: { key, applied }
     // the views' last clears ([] until every view has a context)
     viewClears() {

@@ -377,17 +377,21 @@ def section(title: str) -> None:
     html.Div(title, classes="section-title text-overline")
 
 
+# the drawer's controls are built once the page's first frame is on screen (app/static/frame.js)
+CONTROLS_READY = "trame.utils.lmapd && trame.utils.lmapd.page.controls"
+
+
 def drawer_content() -> None:
     """Everything in the drawer, top to bottom. Its controls are built once the page's first
-    frame is on screen (``controls_ready``, set by app/static/frame.js): about 0.15 s of the
-    page's CPU that the first picture does not need (the views are built first)."""
+    frame is on screen (``CONTROLS_READY``): about 0.15 s of the page's CPU that the first
+    picture does not need (the views are built first)."""
     html.Div(
         "Loading the controls…",
-        v_if="!controls_ready",
+        v_if=f"!({CONTROLS_READY})",
         classes="pa-3 text-medium-emphasis controls-loading",
         **html_attributes(role="status"),
     )
-    with html.Div(v_if="controls_ready", classes="pa-3 controls"):
+    with html.Div(v_if=CONTROLS_READY, classes="pa-3 controls"):
         v3.VBtn(
             "{{ scene_name === 'paper' ? 'Reset to paper scene' : 'Reset to ' + scene_name }}",
             prepend_icon="mdi-restore",

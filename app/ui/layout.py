@@ -133,8 +133,6 @@ def build_layout(server) -> VAppLayout:
     server.state.client_only("link_copied")
     server.state.wave_cursor = ""  # the waveform chart's cursor readout (app.ui.panels)
     server.state.client_only("wave_cursor")
-    server.state.controls_ready = False  # the drawer's controls, after the first frame (frame.js)
-    server.state.client_only("controls_ready")
     with VAppLayout(server, full_height=True) as layout:
         glossary.glossary_dialog()
         lessons.physics_dialog()

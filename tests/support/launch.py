@@ -168,11 +168,18 @@ JS_FRAMES = "() => (window.lmapdFrames || []).length"
 JS_STATE = "(name) => window.trame.state.get(name)"
 
 
+# the drawer's controls are built and their sliders named (app/static/a11y.js names them in the
+# animation frame after they appear)
+JS_CONTROLS_READY = """() => !!document.querySelector('.controls')
+  && [...document.querySelectorAll('[data-a11y-name] [role=slider]')]
+    .every((thumb) => thumb.hasAttribute('aria-label'))"""
+
+
 def wait_first_frame(page, timeout_s: float = 90.0) -> None:
     """Wait until the page has drawn its first simulated frame and built its controls (they
     come right after it: app/static/frame.js)."""
     page.wait_for_function(JS_FRAMES + " > 0", timeout=timeout_s * 1000)
-    page.wait_for_selector(".controls", state="attached", timeout=timeout_s * 1000)
+    page.wait_for_function(JS_CONTROLS_READY, timeout=timeout_s * 1000)
 
 
 def wait_settled(page, timeout_s: float = 60.0) -> None:

@@ -28,6 +28,30 @@ def browser_context_args(browser_context_args):
     return {**browser_context_args, "viewport": {"width": 1600, "height": 1000}}
 
 
+# every page of a test's context keeps its errors (uncaught, unhandled rejections and
+# console.error: Vue's own reports) in window.lmapdErrors, the last MAX_ERRORS of them:
+# support.launch.page_report shows them when a wait runs out
+RECORD_ERRORS = """(() => {
+  const MAX_ERRORS = 20;
+  const keep = (what) => {
+    const errors = (window.lmapdErrors = window.lmapdErrors || []);
+    errors.push(`${(performance.now() / 1000).toFixed(2)} s ${String(what).slice(0, 400)}`);
+    errors.splice(0, Math.max(0, errors.length - MAX_ERRORS));
+  };
+  window.addEventListener('error', (e) => keep(e.error ? e.error.stack || e.error : e.message));
+  window.addEventListener('unhandledrejection', (e) => keep(`unhandled: ${e.reason}`));
+  const error = console.error;
+  console.error = (...args) => { keep(args.map(String).join(' ')); error.apply(console, args); };
+})();"""
+
+
+@pytest.fixture
+def context(context):
+    """pytest-playwright's context, its pages recording their errors (``RECORD_ERRORS``)."""
+    context.add_init_script(RECORD_ERRORS)
+    return context
+
+
 @pytest.fixture(scope="session")
 def artifacts_dir() -> Path:
     """test-artifacts/, or test-artifacts/<worker>/ on a pytest-xdist worker (``make test`` runs

@@ -175,11 +175,50 @@ JS_CONTROLS_READY = """() => !!document.querySelector('.controls')
     .every((thumb) => thumb.hasAttribute('aria-label'))"""
 
 
+# what the page holds when a wait for its first frame or its controls runs out: the failure says
+# which part never came
+JS_PAGE_REPORT = """() => {
+  const lmapd = (window.trame && window.trame.utils && window.trame.utils.lmapd) || null;
+  const unnamed = [...document.querySelectorAll('[data-a11y-name]')]
+    .filter((box) => [...box.querySelectorAll('[role=slider]')]
+      .some((thumb) => !thumb.hasAttribute('aria-label')))
+    .map((box) => box.dataset.a11yName);
+  return {
+    url: window.location.href, visibility: document.visibilityState,
+    connected: !!(window.trame && window.trame.client && window.trame.client.isConnected()),
+    frames: (window.lmapdFrames || []).length, frame_key: window.trame && window.trame.state
+      ? window.trame.state.get('frame_key') : null,
+    pending: lmapd ? lmapd.pending.length : null,
+    controls_flag: lmapd ? lmapd.page.controls : null,
+    controls: document.querySelectorAll('.controls').length,
+    loading: document.querySelectorAll('.controls-loading').length,
+    unnamed_sliders: unnamed,
+    text: document.body ? document.body.innerText.slice(0, 300) : '',
+    errors: window.lmapdErrors || [],
+  };
+}"""
+
+
+def page_report(page) -> dict:
+    """What the page holds now (``JS_PAGE_REPORT``), or why it could not be read."""
+    try:
+        return page.evaluate(JS_PAGE_REPORT)
+    except Exception as exc:  # a page that navigated or crashed: say so
+        return {"unreadable": f"{type(exc).__name__}: {exc}"}
+
+
 def wait_first_frame(page, timeout_s: float = 90.0) -> None:
     """Wait until the page has drawn its first simulated frame and built its controls (they
-    come right after it: app/static/frame.js)."""
-    page.wait_for_function(JS_FRAMES + " > 0", timeout=timeout_s * 1000)
-    page.wait_for_function(JS_CONTROLS_READY, timeout=timeout_s * 1000)
+    come right after it: app/static/frame.js); a timeout says what the page held then."""
+    from playwright.sync_api import TimeoutError as PlaywrightTimeout
+
+    for what, script in (("its first frame", JS_FRAMES + " > 0"), ("its controls", JS_CONTROLS_READY)):
+        try:
+            page.wait_for_function(script, timeout=timeout_s * 1000)
+        except PlaywrightTimeout:
+            raise AssertionError(
+                f"the page did not show {what} within {timeout_s:g} s; it held {page_report(page)}"
+            ) from None
 
 
 def wait_settled(page, timeout_s: float = 60.0) -> None:

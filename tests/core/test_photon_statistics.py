@@ -80,3 +80,19 @@ def test_the_photon_noise_model_runs_through_the_pipeline():
     )
     res = simcore.simulate(scene)
     assert res.summary()["n_target_points"] > 0.9 * res.summary()["n_lit_pixels"]
+
+
+def test_poisson_counts_are_numpys_below_the_exact_limit_and_normal_past_it():
+    """Below EXACT_POISSON: numpy's own draws, the same stream. Past it (numpy refuses means
+    over about 9.2e18): the normal law's mean and variance within their sampling errors."""
+    small = np.array([0.0, 0.5, 40.0, 1e6, photon.EXACT_POISSON])
+    got = photon.poisson_counts(np.random.default_rng(7), small)
+    np.testing.assert_array_equal(got, np.random.default_rng(7).poisson(small))
+    trials = 20_000
+    for mean in (1e16, 1e20, 1e30):
+        counts = photon.poisson_counts(np.random.default_rng(1), np.full(trials, mean))
+        assert counts.dtype == np.float64 and np.all(counts >= 0)
+        assert abs(counts.mean() - mean) < 5 * math.sqrt(mean / trials)
+        assert counts.var() == pytest.approx(mean, rel=5 * math.sqrt(2 / (trials - 1)))
+    mixed = photon.poisson_counts(np.random.default_rng(2), np.array([3.0, 1e25]))
+    assert mixed[0] == int(mixed[0]) and mixed[1] == pytest.approx(1e25, rel=1e-9)

@@ -35,6 +35,10 @@ EXACT_SUM = 64  # photoelectrons per sample whose gains are summed one by one
 TAIL_MASS = 1e-12  # the table stops where less than this much probability is left
 MAX_TABLE = 1 << 22  # gains tabulated at most (32 MB)
 MAX_TRUNCATED = 1e-6  # refused if the table must leave more of the tail than this
+# Poisson means above this are drawn from the normal law (skewness 1 / sqrt(mean) = 3e-8):
+# numpy's Poisson refuses means past about 9.2e18, which a joule-class pulse at a metre reaches
+# (a sample's primaries), and its counts no longer fit an int64
+EXACT_POISSON = 1e15
 
 
 def mcintyre_log_pmf(n, gain: float, k: float):
@@ -95,15 +99,31 @@ def sample_gains(rng: np.random.Generator, size: int, gain: float, k: float) -> 
     return (np.searchsorted(cdf, rng.random(size), side="right") + 1).astype(np.float64)
 
 
+def poisson_counts(rng: np.random.Generator, mean) -> np.ndarray:
+    """Poisson counts of ``mean`` (float64 where a mean passes EXACT_POISSON, drawn from the
+    normal law of the same mean and variance, rounded, never below 0; otherwise numpy's exact
+    int64 draws, the same stream as ``rng.poisson(mean)``)."""
+    mean = np.asarray(mean, dtype=np.float64)
+    large = mean > EXACT_POISSON
+    if not large.any():
+        return rng.poisson(mean)
+    counts = np.empty(mean.shape)
+    counts[~large] = rng.poisson(mean[~large])
+    big = mean[large]
+    counts[large] = np.maximum(0.0, np.rint(big + np.sqrt(big) * rng.standard_normal(big.shape)))
+    return counts
+
+
 def sum_of_gains(rng: np.random.Generator, counts, gain: float, k: float) -> np.ndarray:
     """Sum of ``counts[i]`` independent McIntyre gains for each i: drawn one by one up to
     EXACT_SUM, from the normal law of mean n M and variance n M^2 (F - 1) above."""
-    counts = np.asarray(counts, dtype=np.int64)
+    counts = np.asarray(counts)  # int64, or float64 past what an int64 holds
     out = np.zeros(len(counts))
     few = np.flatnonzero((counts > 0) & (counts <= EXACT_SUM))
     if len(few):
-        g = sample_gains(rng, int(counts[few].sum()), gain, k)
-        owner = np.repeat(few, counts[few])
+        n_few = counts[few].astype(np.int64)
+        g = sample_gains(rng, int(n_few.sum()), gain, k)
+        owner = np.repeat(few, n_few)
         out += np.bincount(owner, weights=g, minlength=len(counts))
     many = np.flatnonzero(counts > EXACT_SUM)
     if len(many):
@@ -138,7 +158,7 @@ class PhotonNoise:
         r, c = np.nonzero(x > 0)
         if len(r):
             i_s = x[r, c].astype(np.float64)
-            primaries = rng.poisson(i_s * dt_s / (Q_E * m))
+            primaries = poisson_counts(rng, i_s * dt_s / (Q_E * m))
             current = Q_E * sum_of_gains(rng, primaries, m, self.k) / dt_s
             excess_var = (fc - 1.0) * 2.0 * Q_E * m * f * i_s / (2.0 * dt_s)
             white[r, c] += current - i_s + np.sqrt(excess_var) * rng.standard_normal(len(r))

@@ -122,6 +122,19 @@ class TargetMesh:
         return np.ptp(mesh_bounds(self.vertices_m, self.faces), axis=0)
 
     @cached_property
+    def closed(self) -> bool:
+        """Whether the triangles close a surface wound one way: every directed edge once and
+        its reverse once (a file's split vertices, or an open sheet, make it False)."""
+        n = len(self.vertices_m)
+        edges = self.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+        forward = edges[:, 0] * n + edges[:, 1]
+        backward = edges[:, 1] * n + edges[:, 0]
+        return bool(
+            len(forward) and len(np.unique(forward)) == len(forward)
+            and np.isin(backward, forward).all()
+        )  # fmt: skip
+
+    @cached_property
     def as_trimesh(self) -> trimesh.Trimesh:
         """The mesh as a ``trimesh.Trimesh`` (of copies of the arrays), made on first use."""
         import trimesh  # noqa: PLC0415  (a third of a second to import: only when asked for)

@@ -10,7 +10,7 @@ import numpy as np
 from ..constants import C
 from ..illumination import illumination_gain
 from ..pulse import scene_pulse_shape
-from ..scene import Scene
+from ..scene import Scene, SceneError
 from ..stage import Stage, readonly
 from ..target import TargetModel, load_target, source_stamp
 from .casting import Hits, RayCaster
@@ -72,7 +72,42 @@ def stage_hits(scene: Scene, tgt: TargetStage, rays: RayGrid) -> Hits:
     for block in (hits.base, hits.refined):
         if block is not None:
             readonly(block.range_m, block.cos_theta, block.face, block.depth_m)
+    check_standoff(tgt.model, pose, hits.base)
     return hits
+
+
+# the nearest surface the echo model holds for [m]: the far-field range equation's 1 / R^2 grows
+# without bound at the surface (a joule-class pulse at a few millimetres overflowed the waveform);
+# distance_m's own lower end
+MIN_STANDOFF_M = 0.3
+
+
+def check_standoff(model, pose, block) -> None:
+    """Refuse (SceneError naming distance_m) a pose that puts the lidar closer than
+    MIN_STANDOFF_M to the surface it sees, or inside a closed target: most of its first hits
+    on the inner side of their faces (what a closed surface shows from within)."""
+    ranges = block.range_m[np.isfinite(block.range_m)]
+    if not len(ranges):
+        return
+    nearest = float(ranges.min())
+    if nearest < MIN_STANDOFF_M:
+        raise SceneError(
+            f"distance_m: the lidar is {nearest:.3g} m from the target's surface, closer than the "
+            f"{MIN_STANDOFF_M:g} m the echo model holds for: move it back (distance_m is to the "
+            "target's centre)"
+        )
+    surface = model.surface
+    if surface.closed:
+        at_t = -pose.rotation.T @ pose.translation_m  # the lidar in the target frame
+        faces = block.face[block.face >= 0]
+        corner = surface.vertices_m[surface.faces[faces, 0]]
+        inner = np.einsum("ij,ij->i", surface.face_normals[faces], corner - at_t) > 0.0
+        if inner.mean() > 0.5:
+            raise SceneError(
+                f"distance_m: the lidar at {pose.translation_m[2]:.3g} m from the target's centre "
+                f"is inside the target ({model.name}, {surface.radius_m:.3g} m to its farthest "
+                "corner): move it back"
+            )
 
 
 def _hits_reads(s: Scene) -> tuple:

@@ -212,7 +212,8 @@ def wait_first_frame(page, timeout_s: float = 90.0) -> None:
     come right after it: app/static/frame.js); a timeout says what the page held then."""
     from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
-    for what, script in (("its first frame", JS_FRAMES + " > 0"), ("its controls", JS_CONTROLS_READY)):
+    waits = (("its first frame", JS_FRAMES + " > 0"), ("its controls", JS_CONTROLS_READY))
+    for what, script in waits:
         try:
             page.wait_for_function(script, timeout=timeout_s * 1000)
         except PlaywrightTimeout:

@@ -38,7 +38,7 @@ app: $(STAMP)
 ##   make test TEST_WORKERS=0     in one process
 TEST_WORKERS ?= 2
 test: $(STAMP) chromium
-	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile
+	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder
 
 ## make bench: the core's stage timings (docs/performance.md)
 bench: $(STAMP)

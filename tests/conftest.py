@@ -19,19 +19,24 @@ if "NUMBA_CACHE_DIR" not in os.environ and cache_dir() is not None:
     os.environ["NUMBA_CACHE_DIR"] = str(cache_dir() / "numba")
 
 # The slowest files, run first: `make test` gives each file to one of two workers as it frees
-# up, so a long file picked up last kept one worker busy alone for minutes (a full run's files
-# took 1,062 s in all, the run 626 s: about 95 s of one worker idle). Seconds per file measured
-# on this project's 2-core machine, 2026-11-26 (pytest --durations=0, summed per file).
+# up, so a long file picked up last kept one worker busy alone for minutes. pytest-xdist 3.8
+# reorders files by their number of tests unless told not to (the Makefile passes
+# --no-loadscope-reorder): without it the one-test soak ran last. At the start each worker takes
+# two files (the first and the third to one of them), so the soak and the sessions' browser
+# test, the two that load the machine most, run one after the other on one worker. Seconds per
+# file (junit, two full runs on this project's 2-core machine, 2026-11-26).
 SLOW_FIRST = (
-    "tests/core/test_extremes_property.py",  # 97 s
-    "tests/browser/test_sessions_browser.py",  # 72 s
-    "tests/browser/test_soak.py",  # 70 s
-    "tests/app/test_app_reliability.py",  # 56 s
-    "tests/app/test_app_launcher.py",  # 38 s
-    "tests/core/test_extremes.py",  # 37 s
-    "tests/cli/test_reproduce.py",  # 35 s
-    "tests/core/test_cache_keys.py",  # 28 s
-    "tests/core/test_design.py",  # 26 s
+    "tests/browser/test_soak.py",  # 89-124 s
+    "tests/app/test_app_reliability.py",  # 52-87 s
+    "tests/browser/test_sessions_browser.py",  # 92-98 s
+    "tests/browser/test_lessons_browser.py",  # 44-49 s
+    "tests/app/test_app_launcher.py",  # 43-44 s
+    "tests/browser/test_classroom_browser.py",  # 37-48 s
+    "tests/core/test_extremes.py",  # 37-42 s
+    "tests/browser/test_a11y_browser.py",  # 37-43 s
+    "tests/core/test_design.py",  # 34-38 s
+    "tests/cli/test_reproduce.py",  # 30-32 s
+    "tests/browser/test_screens_browser.py",  # 28-32 s
 )
 
 

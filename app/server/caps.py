@@ -28,6 +28,9 @@ class Caps:
     max_sessions : sessions open at once; the warm spare counts too (at most this many processes)
     memory_cap_bytes : the children's total memory that no new session may take beyond [bytes]
     idle_s : a session whose websocket has been closed this long is stopped [s]
+    connect_s : a new session whose page has not opened its websocket yet is given at least this
+        long (its page loads its files first: seconds on a loaded machine; a 1 s idle_s had
+        ended sessions whose pages were still loading) [s]
     spare : keep one process started ahead
     start_timeout_s : a process that has not listened after this long is given up [s]
     input_idle_s : a session whose page has sent nothing this long is stopped, socket or not [s]
@@ -43,6 +46,7 @@ class Caps:
     memory_cap_bytes: int
     idle_s: float = 60.0
     spare: bool = True
+    connect_s: float = 30.0
     start_timeout_s: float = 120.0
     input_idle_s: float = 1800.0
     max_age_s: float = 8 * 3600.0

@@ -53,6 +53,7 @@ class Child:
     token: str
     started_s: float
     n_sockets: int = 0
+    connected: bool = False  # its page has opened a websocket (the reaper's idle time applies)
     idle_since_s: float = 0.0
     drain: asyncio.Task | None = None
     secret: str = ""

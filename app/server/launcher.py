@@ -371,8 +371,12 @@ class Launcher:
     def why_end(self, child: Child, now: float) -> str | None:
         """Why a live session should end now, or None."""
         caps = self.caps
-        if child.n_sockets == 0 and now - child.idle_since_s >= caps.idle_s:
-            return f"its page closed for {caps.idle_s:g} s"
+        if child.n_sockets == 0:
+            if child.connected and now - child.idle_since_s >= caps.idle_s:
+                return f"its page closed for {caps.idle_s:g} s"
+            wait_s = max(caps.idle_s, caps.connect_s)
+            if not child.connected and now - child.idle_since_s >= wait_s:
+                return f"its page did not connect within {wait_s:g} s"
         if now - child.last_input_s >= caps.input_idle_s:
             return f"no input from its page for {caps.input_idle_s:g} s"
         if now - child.opened_s >= caps.max_age_s:

@@ -85,15 +85,16 @@ async def websocket(
             log.warning("session process %d refused its websocket: %s", child.pid, exc)
             return web.Response(status=502, text="The session's process did not answer\n")
         await page.prepare(request)
+        child.connected = True
         child.pages.add(page)
         tasks = [
             asyncio.create_task(_pump(page, upstream, child)),
             asyncio.create_task(_pump(upstream, page)),
         ]
-        _, pending = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
-        for task in pending:
+        await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
+        for task in tasks:
             task.cancel()
-        await asyncio.gather(*pending, return_exceptions=True)
+        await asyncio.gather(*tasks, return_exceptions=True)  # each one's end read, none logged
     finally:
         child.n_sockets -= 1
         child.pages.discard(page)
@@ -121,15 +122,18 @@ def deflates(request: web.Request) -> bool:
 async def _pump(source, sink, child: Child | None = None) -> None:
     """Pass one websocket's frames to another until either closes; frames from a page
     (``child`` given) are its session's input."""
-    async for msg in source:
-        if child is not None:
-            child.last_input_s = time.monotonic()
-        if msg.type == aiohttp.WSMsgType.BINARY:
-            await sink.send_bytes(msg.data)
-        elif msg.type == aiohttp.WSMsgType.TEXT:
-            await sink.send_str(msg.data)  # refused by the process's guard (closes)
-        else:
-            break
+    try:
+        async for msg in source:
+            if child is not None:
+                child.last_input_s = time.monotonic()
+            if msg.type == aiohttp.WSMsgType.BINARY:
+                await sink.send_bytes(msg.data)
+            elif msg.type == aiohttp.WSMsgType.TEXT:
+                await sink.send_str(msg.data)  # refused by the process's guard (closes)
+            else:
+                break
+    except (aiohttp.ClientError, ConnectionError):  # the other side closed meanwhile: done
+        return
 
 
 def _path(rest: str) -> str:

@@ -33,7 +33,7 @@ from support.ci import skip_unless_ci
 from support.hostile_client import Client
 from support.launch import app_process
 
-from app.server import connections
+from app.server import connections, proxy
 from app.server import launcher as lau
 
 TOKEN = "launcher-test-token"
@@ -496,7 +496,8 @@ def test_idle_sessions_end_and_dead_ones_are_forgotten_and_close_stops_all():
             )
             victim = launcher.sessions[dies.id]
             idle_child = launcher.sessions[idle.id]
-            launcher.caps = dataclasses.replace(launcher.caps, idle_s=0.3)  # from now on
+            # from now on; the page that never connected is given connect_s
+            launcher.caps = dataclasses.replace(launcher.caps, idle_s=0.3, connect_s=0.3)
             os.kill(victim.pid, signal.SIGKILL)
             await until(lambda: len(launcher.sessions) == 1, "the idle and the dead session")
             assert launcher.n_reaped == 1 and idle_child.proc.returncode is not None
@@ -508,6 +509,57 @@ def test_idle_sessions_end_and_dead_ones_are_forgotten_and_close_stops_all():
             await until(lambda: launcher.spare is not None and launcher.spare.done(), "a spare")
             pids = [c.pid for c in launcher._all]
         assert pids and not any(psutil.pid_exists(p) and _running(p) for p in pids)
+
+    run(body)
+
+
+def test_a_page_still_loading_keeps_its_session_past_the_idle_time_until_connect_s():
+    """A new session's page loads its files before it opens its websocket (seconds on a loaded
+    machine): the reaper gives it connect_s, not idle_s; once its page has connected and closed,
+    idle_s applies."""
+
+    async def body():
+        async with serving(caps(idle_s=0.2, connect_s=WAIT_S, spare=False)) as (
+            launcher,
+            base,
+            client,
+        ):
+            loading = await new_session(client, base)
+            child = launcher.sessions[loading.id]
+            await asyncio.sleep(1.0)  # five idle times, a few reaper rounds
+            assert loading.id in launcher.sessions and not child.connected
+            ws = await client.ws_connect(
+                f"ws://{base[7:]}{loading.path}ws",
+                headers={"Origin": base, **loading.headers(base)},
+            )
+            await until(lambda: child.connected, "the page's websocket")
+            await ws.close()
+            await until(lambda: loading.id not in launcher.sessions, "the closed page's session")
+            late = await new_session(client, base)
+            launcher.caps = dataclasses.replace(launcher.caps, connect_s=0.3)
+            await until(lambda: late.id not in launcher.sessions, "the page that never came")
+
+    run(body)
+
+
+def test_a_pump_whose_other_side_closed_ends_quietly():
+    """A page that goes while its session's frames are on their way: the frame's send fails
+    (aiohttp's ClientConnectionResetError) and the pump ends without an exception that asyncio
+    would log as a traceback ("Task exception was never retrieved")."""
+
+    class Source:
+        def __aiter__(self):
+            return self
+
+        async def __anext__(self):
+            return aiohttp.WSMessage(aiohttp.WSMsgType.BINARY, b"frame", None)
+
+    class ClosingSink:
+        async def send_bytes(self, data):
+            raise aiohttp.ClientConnectionResetError("Cannot write to closing transport")
+
+    async def body():
+        assert await proxy._pump(Source(), ClosingSink()) is None
 
     run(body)
 

@@ -146,7 +146,10 @@ class Launcher:
         websocket = request.headers.get("Upgrade", "").lower() == "websocket"
         path = request.path
         if request.method not in ("GET", "HEAD"):
-            self.log.warning("method", "refused a %s request from %s", "non-GET", request.remote)
+            if not _session_manager_probe(request):
+                self.log.warning(
+                    "method", "refused a %s request from %s", "non-GET", request.remote
+                )
             return web.Response(status=405, text="Method not allowed\n")
         found = routes.SESSION_ID.match(path)
         if found:  # a session's own cookie lets in, not the token
@@ -434,6 +437,14 @@ class Launcher:
             await self.zygote.close()
         if self._client is not None:
             await self._client.close()
+
+
+def _session_manager_probe(request: web.Request) -> bool:
+    """trame's page first asks a session manager where to connect (a POST to ``paraview/``
+    beside it); there is none, so it connects to its own ``ws``. Every page load does it: it is
+    answered 405 like any other POST, but not logged as a refusal."""
+    found = routes.SESSION_ID.match(request.path)
+    return request.method == "POST" and found is not None and found["rest"] == "/paraview/"
 
 
 def _open(n: int) -> str:

@@ -14,6 +14,7 @@ import concurrent.futures
 import contextlib
 import dataclasses
 import json
+import logging
 import os
 import re
 import resource
@@ -192,7 +193,9 @@ def test_a_sessions_token_is_never_on_its_command_line():
 
 
 # -- the launcher with stand-in sessions --------------------------------------------------------
-def test_the_token_opens_a_session_of_its_own_and_its_page_is_proxied():
+def test_the_token_opens_a_session_of_its_own_and_its_page_is_proxied(caplog):
+    caplog.set_level(logging.WARNING, logger="app.server.launcher")
+
     async def body():
         async with serving(caps()) as (launcher, base, client):
             assert (await get(client, f"{base}/"))[0] == 403
@@ -216,8 +219,14 @@ def test_the_token_opens_a_session_of_its_own_and_its_page_is_proxied():
             assert status == 302 and headers["Location"].endswith("/")
             async with client.post(f"{base}{first.path}", data=b"x") as answer:
                 assert answer.status == 405
+            # trame's page asks a session manager first (there is none): answered, not logged
+            probe = f"{base}{first.path}paraview/"
+            async with client.post(probe, headers=first.headers(base)) as ans:
+                assert ans.status == 405
 
     run(body)
+    refusals = [r for r in caplog.records if "non-GET" in r.getMessage()]
+    assert len(refusals) == 1  # the POST to the page, not the page's own probe
 
 
 def test_a_session_is_bound_to_the_browser_that_opened_it():

@@ -37,9 +37,17 @@ def moved(url: str) -> bool:
     return "/s/" in url or "token" not in url
 
 
+# The door's page streams: it says at once that the session is starting and ends when the
+# session listens (seconds on a loaded machine, and over Playwright's 30 s for a navigation's
+# "load" once in CI). Navigations to it wait for the answer to begin ("commit"); the move to the
+# session is then waited for with its own limit (SESSION_START_S).
+DOOR = "commit"
+SESSION_START_S = 120.0
+
+
 def open_tab(page, url: str, pixels: int = 64) -> None:
-    page.goto(url)  # the door's page moves the tab to its session
-    page.wait_for_url(moved)
+    page.goto(url, wait_until=DOOR)  # the door's page moves the tab to its session
+    page.wait_for_url(moved, timeout=SESSION_START_S * 1000)
     wait_first_frame(page)
     page.wait_for_function("(p) => window.trame.state.get('pixels') === p", arg=pixels)
     wait_settled(page)
@@ -71,8 +79,8 @@ def test_two_tabs_keep_their_own_scenes(page, launcher_url):
         assert state(page, "pitch_deg") == 30
         assert state(other, "pitch_deg") == 0 and point_count(other) == before
         first = session_of(other)
-        other.reload()  # the address shown is the launcher's: a new session, the default scene
-        other.wait_for_url(moved)
+        other.reload(wait_until=DOOR)  # the address shown is the launcher's: a new session
+        other.wait_for_url(moved, timeout=SESSION_START_S * 1000)
         wait_first_frame(other)
         wait_settled(other)
         assert session_of(other) != first and state(other, "pitch_deg") == 0
@@ -122,17 +130,17 @@ def test_over_the_cap_a_503_page_says_how_many_are_open(page, artifacts_dir):
         open_tab(page, url + SMALL)
         second = page.context.new_page()
         try:
-            answer = second.goto(url + SMALL)
+            answer = second.goto(url + SMALL, wait_until=DOOR)
             assert answer.status == 503
             message = second.locator(".launcher-message").inner_text()
             assert "1 session is open" in message and "--max-sessions" in message
             page.close()  # its session ends 1 s after its websocket closed: room for the next
             for _ in range(60):  # bounded; each try is a page load
-                answer = second.goto(url + SMALL)
+                answer = second.goto(url + SMALL, wait_until=DOOR)
                 if answer.status != 503:
                     break
                 second.wait_for_timeout(500)
-            second.wait_for_url(moved)
+            second.wait_for_url(moved, timeout=SESSION_START_S * 1000)
             wait_first_frame(second)
             assert session_of(second)
         finally:
@@ -145,8 +153,8 @@ def test_a_session_ended_for_want_of_input_says_so_on_its_page(page, artifacts_d
     log_path = artifacts_dir / "app-server-sessions-idle.log"
     options = ("--max-sessions", "2", "--no-spare", "--input-idle-min", "0.1")  # 6 s
     with app_server(log_path=log_path, sessions=True, app_args=options) as url:
-        page.goto(url + SMALL)
-        page.wait_for_url(moved)
+        page.goto(url + SMALL, wait_until=DOOR)
+        page.wait_for_url(moved, timeout=SESSION_START_S * 1000)
         note = page.locator(".session-ended")
         note.wait_for(timeout=120_000)
         assert note.inner_text() == "Session ended: reload for a new one."

@@ -123,16 +123,11 @@ class TargetMesh:
 
     @cached_property
     def closed(self) -> bool:
-        """Whether the triangles close a surface wound one way: every directed edge once and
-        its reverse once (a file's split vertices, or an open sheet, make it False)."""
-        n = len(self.vertices_m)
-        edges = self.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-        forward = edges[:, 0] * n + edges[:, 1]
-        backward = edges[:, 1] * n + edges[:, 0]
-        return bool(
-            len(forward) and len(np.unique(forward)) == len(forward)
-            and np.isin(backward, forward).all()
-        )  # fmt: skip
+        """Whether the triangles close a surface wound one way (trimesh's watertight and
+        winding-consistent: every edge in two faces, reversed between them; a file's split
+        vertices, or an open sheet, make it False). Made on first use, with :attr:`as_trimesh`."""
+        mesh = self.as_trimesh
+        return bool(mesh.is_watertight and mesh.is_winding_consistent)
 
     @cached_property
     def as_trimesh(self) -> trimesh.Trimesh:

@@ -145,13 +145,15 @@ class Launcher:
     async def handle(self, request: web.Request) -> web.StreamResponse:
         websocket = request.headers.get("Upgrade", "").lower() == "websocket"
         path = request.path
+        found = routes.SESSION_ID.match(path)
         if request.method not in ("GET", "HEAD"):
-            if not _session_manager_probe(request):
+            # trame's page first asks a session manager where to connect (a POST to the
+            # paraview/ beside it, every load); there is none: answered, but not a refusal to log
+            if not (found and found["rest"] == "/paraview/" and request.method == "POST"):
                 self.log.warning(
                     "method", "refused a %s request from %s", "non-GET", request.remote
                 )
             return web.Response(status=405, text="Method not allowed\n")
-        found = routes.SESSION_ID.match(path)
         if found:  # a session's own cookie lets in, not the token
             return await self.in_session(request, found, websocket)
         authorised, from_address = self.door.token_ok(request)
@@ -374,11 +376,11 @@ class Launcher:
     def why_end(self, child: Child, now: float) -> str | None:
         """Why a live session should end now, or None."""
         caps = self.caps
-        if child.n_sockets == 0:
-            if child.connected and now - child.idle_since_s >= caps.idle_s:
-                return f"its page closed for {caps.idle_s:g} s"
-            wait_s = max(caps.idle_s, caps.connect_s)
-            if not child.connected and now - child.idle_since_s >= wait_s:
+        if child.n_sockets == 0:  # a page still loading is given connect_s at least
+            wait_s = caps.idle_s if child.connected else max(caps.idle_s, caps.connect_s)
+            if now - child.idle_since_s >= wait_s:
+                if child.connected:
+                    return f"its page closed for {wait_s:g} s"
                 return f"its page did not connect within {wait_s:g} s"
         if now - child.last_input_s >= caps.input_idle_s:
             return f"no input from its page for {caps.input_idle_s:g} s"
@@ -437,14 +439,6 @@ class Launcher:
             await self.zygote.close()
         if self._client is not None:
             await self._client.close()
-
-
-def _session_manager_probe(request: web.Request) -> bool:
-    """trame's page first asks a session manager where to connect (a POST to ``paraview/``
-    beside it); there is none, so it connects to its own ``ws``. Every page load does it: it is
-    answered 405 like any other POST, but not logged as a refusal."""
-    found = routes.SESSION_ID.match(request.path)
-    return request.method == "POST" and found is not None and found["rest"] == "/paraview/"
 
 
 def _open(n: int) -> str:

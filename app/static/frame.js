@@ -78,6 +78,25 @@
       }));
       setTimeout(() => onScreen(MAX_RENDERS, MAX_WAITS), 0);
     },
+    // The view ``ref``'s camera reset goes to ``camera`` (the state's home camera: the view's
+    // reset_camera event, app.ui.views3d). A new vtk.js view resets its camera as it mounts and
+    // again 100 ms later (trame-vtk's VtkView, for data that come after the mount); that second
+    // reset would only set the same home camera again and draw both views once more (with WebGL
+    // in software, about 0.15 s of a first picture), so it is called off here: the view's data
+    // come with the state, and each later frame's camera is set by the server.
+    setCamera(ref, camera) {
+      const view = window.trame.refs[ref];
+      if (!view) return;
+      view.setCamera(camera);
+      const api = view.$ && view.$.provides && view.$.provides.view;
+      // the mount's reset calls this before it sets its timer: called off once the mount is done
+      queueMicrotask(() => {
+        if (api && api.resetCameraTimeout) {
+          clearTimeout(api.resetCameraTimeout);
+          api.resetCameraTimeout = null;
+        }
+      });
+    },
     // report frame ``key`` shown, and the frames applied before it that are still waiting
     report(key) {
       const upto = this.pending.findIndex((f) => f.key === key);

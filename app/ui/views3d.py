@@ -41,7 +41,7 @@ def _view(ref: str, camera: str = "home_camera"):
     return vtkw.VtkView(
         ref=ref,
         background=(BACKGROUND,),
-        reset_camera=f"trame.refs['{ref}'].setCamera({camera})",
+        reset_camera=f"trame.utils.lmapd.setCamera('{ref}', {camera})",
         __events=[("reset_camera", "resetCamera")],
     )
 

@@ -116,3 +116,30 @@ def test_each_view_draws_the_first_frame_once_at_its_size(page, app_url):
             assert view["sizedBefore"] == 1, view
     finally:
         other.close()
+
+
+# when the first of each selector's elements appeared in the page [ms, page clock]
+APPEARED = """(() => {
+  window.appeared = {};
+  new MutationObserver(() => {
+    const sels = ['.controls', '.array-card', '.waveform-card', '.stats-card', '.scene-card'];
+    for (const sel of sels) {
+      if (!(sel in window.appeared) && document.querySelector(sel)) {
+        window.appeared[sel] = performance.now();
+      }
+    }
+  }).observe(document, { subtree: true, childList: true });
+})()"""
+
+
+def test_the_panels_below_the_views_are_built_after_the_first_frame(page, app_url):
+    """The picture a new tab waits for is the two 3D views: the array image, the waveforms and
+    the stats are built with the drawer's controls, after the first frame is on screen."""
+    page.add_init_script(APPEARED)
+    page.goto(app_url)
+    wait_first_frame(page)
+    shown = page.evaluate("() => window.lmapdFrames[0].t")
+    appeared = page.evaluate("() => window.appeared")
+    assert appeared[".scene-card"] < shown, appeared
+    for later in (".controls", ".array-card", ".waveform-card", ".stats-card"):
+        assert appeared[later] >= shown, (later, appeared, shown)

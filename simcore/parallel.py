@@ -86,6 +86,20 @@ _pool_size = 0
 _pool_lock = threading.Lock()
 
 
+def _forget_pool_in_child() -> None:
+    """In a process forked from this one: the pool's threads did not come along (only the
+    forking thread does), so the pool is dropped and a new one made at the next call; the lock
+    is new too (another thread may have held it at the fork). Without this, a frame in a child
+    forked after a parallel frame (the app's sessions, forked from a parent that computed their
+    first frame) waited for ever on threads that do not exist."""
+    global _pool, _pool_size, _pool_lock
+    _pool, _pool_size, _pool_lock = None, 0, threading.Lock()
+
+
+if hasattr(os, "register_at_fork"):  # POSIX
+    os.register_at_fork(after_in_child=_forget_pool_in_child)
+
+
 def map_threads(fn: Callable[[T], R], items: Sequence[T]) -> list[R]:
     """``[fn(x) for x in items]`` on the shared pool of ``threads()`` threads (kept alive between
     frames: starting threads per call costs more than small frames gain). Serial for one item or

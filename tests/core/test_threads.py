@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import json
 import os
+import select
+import signal
 import subprocess
 import sys
 
@@ -115,3 +117,32 @@ def test_the_monte_carlo_gives_the_same_stops_at_1_2_and_3_threads():
     exact = [run(t, max_bytes=b, resolution_s=0.0) for t, b in ((1, 1 << 20), (2, 1 << 18))]
     for name in ("detected", "range_m", "false_alarm_pixel", "false_alarm_range_m"):
         np.testing.assert_array_equal(getattr(exact[0], name), getattr(exact[1], name))
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="fork is POSIX's")
+def test_a_process_forked_after_the_pool_ran_gets_a_pool_of_its_own():
+    """The app's sessions are forked from a parent that computed their first frame on the
+    pool's threads; threads do not survive a fork, so the child's first parallel call must make
+    a new pool instead of waiting on the parent's (it waited for ever before)."""
+    parallel.set_threads(2)
+    try:
+        assert parallel.map_threads(lambda x: x * x, [1, 2, 3]) == [1, 4, 9]  # the pool made
+        read, write = os.pipe()
+        pid = os.fork()
+        if pid == 0:  # the child: its answer through the pipe, then out (never pytest's exit)
+            try:
+                os.close(read)
+                answer = parallel.map_threads(lambda x: x + 1, [1, 2, 3])
+                os.write(write, json.dumps(answer).encode())
+            finally:
+                os._exit(0)
+        os.close(write)
+        with os.fdopen(read) as pipe:
+            ready = select.select([pipe], [], [], 60.0)[0]  # a hung child writes nothing
+            answer = json.loads(pipe.read()) if ready else None
+        if answer is None:
+            os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)
+        assert answer == [2, 3, 4]
+    finally:
+        parallel.set_threads(parallel.default_threads())

@@ -180,8 +180,10 @@ class Engine:
         """``model``: the scene's target if already loaded (else it is loaded here);
         ``frame_budget_bytes``: a frame estimated to take more memory is refused before it runs
         (frame_bytes); ``shared``: a pipeline whose target stage (the mesh and its ray-casting
-        structure) this engine's pipelines take instead of building their own (the sessions'
-        preloaded parent, app.server.zygote, shares one with every session it forks)."""
+        structure) this engine's pipelines take instead of building their own, and whose other
+        stages its frames' pipeline takes (the sessions' preloaded parent, app.server.zygote,
+        shares one with every session it forks, holding the scene's first frame: a new
+        session's first frame then only builds its views)."""
         self.frame_budget_bytes = frame_budget_bytes
         self.model = model if model is not None else simcore.load_target(scene.target)
         self.frame = scene3d.display_frame(self.model)
@@ -192,9 +194,9 @@ class Engine:
         self.preview_pipeline = simcore.Pipeline()
         # ... but one target stage between the two, built by whichever runs first: the MRO's is
         # 10-20 MB of ray-casting structure and 9 MB of mesh arrays (read-only once built)
-        for pipeline in (self.pipeline, self.preview_pipeline):
-            if shared is not None:
-                pipeline.adopt(shared)
+        if shared is not None:
+            self.pipeline.adopt(shared, stages=simcore.STAGES)
+            self.preview_pipeline.adopt(shared)
         self.vertices_d = self.frame.from_target(self.model.mesh.vertices)  # display frame
         # key (the seen set's content), seen-facets mesh, legend
         self._facets: tuple | None = None

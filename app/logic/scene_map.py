@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import simcore
-from app.state import Controls, receiver_controls
+from app.state import Controls, controls_from_scene, receiver_controls
 from simcore.target import with_materials
 
 
@@ -75,6 +75,13 @@ def scene_from_controls(base: simcore.Scene, controls: Controls) -> simcore.Scen
     """``base`` with the controls applied. Raises simcore.SceneError (a ValueError) naming the key
     if a value is invalid for the core."""
     return simcore.with_overrides(base, scene_overrides(controls))
+
+
+def first_scene(base: simcore.Scene, model: simcore.TargetModel) -> simcore.Scene:
+    """The scene of the app's first frame on ``base`` (``model``: its target): ``base`` with the
+    controls a page starts with (the fidelity preset's, not the scene file's own fidelity)."""
+    controls, _messages = controls_from_scene(base, resolved_materials(model, base))
+    return scene_from_controls(base, controls)
 
 
 def resolved_materials(model: simcore.TargetModel, scene: simcore.Scene) -> dict[str, str]:

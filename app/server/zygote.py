@@ -38,7 +38,7 @@ def _die_with_parent() -> None:
         pass
 
 
-def warm_up(scene):
+def warm_up(scene, model):
     """Compute a tiny frame (8 x 8 pixels) at the scene's fidelity and at the preview's, so that
     the compiled kernels and the tables every frame needs are loaded here once, in pages the
     sessions share (a session's own memory after its first 256 x 256 frame: 63 MB instead of
@@ -46,12 +46,17 @@ def warm_up(scene):
     with NUMBA_THREADING_LAYER=workqueue): GNU OpenMP's, the default, aborts a process forked
     after using it.
 
-    Returns the pipeline of the tiny frame: its target stage (the mesh, its parts and the
-    ray-casting structure, read-only once built) is every forked session's, so that no session
-    builds its own (the MRO's: 10-20 MB of BVH and 9 MB of arrays, twice a session with its
-    previews)."""
+    Then computes the app's first frame of the scene (``model``: its target; the frame at the
+    controls a page starts with, app.logic.scene_map.first_scene) on the same pipeline, and
+    returns it: its target
+    stage (the mesh, its parts and the ray-casting structure, read-only once built) is every
+    forked session's, so that no session builds its own (the MRO's: 10-20 MB of BVH and 9 MB of
+    arrays, twice a session with its previews); its other stages are each session's first
+    frame, which a session then only turns into its views (a class opening the printed address
+    together starts many sessions at once: each would compute the same frame)."""
     import simcore  # noqa: PLC0415
     from app.engine import Engine  # noqa: PLC0415
+    from app.logic.scene_map import first_scene  # noqa: PLC0415
 
     tiny = simcore.with_overrides(scene, pixels=8)
     shared = simcore.Pipeline()
@@ -59,6 +64,7 @@ def warm_up(scene):
     preview = simcore.Pipeline()
     preview.adopt(shared)
     preview.run(Engine.preview_scene(tiny))
+    shared.run(first_scene(scene, model))
     return shared
 
 
@@ -75,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         scene = simcore.load_scene(args.scene)
         model = simcore.load_target(scene.target)
-        shared = warm_up(scene)
+        shared = warm_up(scene, model)
     except (simcore.SceneError, simcore.TargetError, OSError) as exc:
         print(f"lmapd app: {exc}", file=sys.stderr)
         return 2

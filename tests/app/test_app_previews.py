@@ -11,6 +11,8 @@ from support.app_helpers import change, small_app
 import simcore
 from app.engine import PREVIEW_FIDELITY, Engine, Request
 from app.logic.controller import PREVIEW_LABEL
+from app.main import LmapdApp
+from app.server.zygote import warm_up
 
 
 @pytest.fixture(scope="module")
@@ -160,3 +162,26 @@ def test_an_engine_takes_the_target_stage_of_a_shared_pipeline(model):
     engine.compute_preview(Request(scene=scene))
     assert engine.pipeline.cached("target", scene) is built
     assert engine.preview_pipeline.cached("target", scene) is built
+
+
+def test_a_forked_sessions_first_frame_is_its_parents_and_only_its_views_are_built(model):
+    """The sessions' preloaded parent computes the app's first frame (at the controls a page
+    starts with) once; a session forked from it takes every stage of that frame and builds only
+    its views, instead of computing the same frame again (a class opening the printed address
+    together starts many sessions at once)."""
+    scene = simcore.load_scene()
+    shared = warm_up(scene, model)
+    app = LmapdApp(
+        scene, engine=Engine(scene, model, shared=shared), flow_control=False, debounce_s=0.0
+    )
+    try:
+        app.state.ready()
+        assert app.logic.runner.wait_idle(120)
+        frame = app.logic.last_frame
+        assert frame is not None and frame.summary["n_points"] > 0
+        assert set(frame.timings_s.values()) == {0.0}, frame.timings_s  # every stage cached
+        first = frame.result.scene
+        for name in simcore.STAGES:
+            assert app.engine.pipeline.cached(name, first) is shared.cached(name, first), name
+    finally:
+        app.logic.runner.close()

@@ -19,8 +19,10 @@ it must hand the outcome over to the UI thread itself (the app posts it to the e
 from __future__ import annotations
 
 import logging
+import os
 import threading
 import time
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Generic, TypeVar
@@ -29,6 +31,23 @@ Request = TypeVar("Request")
 Value = TypeVar("Value")
 
 log = logging.getLogger(__name__)
+
+# the open runners of this process: a process forked from it has none of their worker threads
+_runners: weakref.WeakSet[Runner] = weakref.WeakSet()
+
+
+def _after_fork_in_child() -> None:
+    """In a process forked from this one (the app's sessions, forked from a parent that built
+    their app): each runner's worker thread stayed behind, so each gets a new lock and starts a
+    new worker at its first request (not counted as a restart: nothing died)."""
+    for runner in list(_runners):
+        runner._cond = threading.Condition()
+        runner._computing = False
+        runner._forked = True
+
+
+if hasattr(os, "register_at_fork"):  # POSIX
+    os.register_at_fork(after_in_child=_after_fork_in_child)
 
 
 class StaleRequest(Exception):
@@ -88,8 +107,10 @@ class Runner(Generic[Request, Value]):
         self.n_dropped = 0
         self.n_restarts = 0  # workers replaced after dying (see _ensure_worker)
         self._name = name
+        self._forked = False  # this process was forked after the worker started (see above)
         self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
         self._thread.start()
+        _runners.add(self)
 
     # -- the UI side -----------------------------------------------------------------------------
     def submit(self, request: Request) -> int:
@@ -191,9 +212,12 @@ class Runner(Generic[Request, Value]):
         no ``except Exception`` catches, or its thread ended while the runner is open)."""
         if self._thread.is_alive() or self._closed:
             return
-        log.warning("the runner's worker thread died; starting a new one")
-        self._computing = False
-        self.n_restarts += 1
+        if self._forked:  # a new process: its worker starts now
+            self._forked = False
+        else:
+            log.warning("the runner's worker thread died; starting a new one")
+            self._computing = False
+            self.n_restarts += 1
         self._thread = threading.Thread(target=self._loop, name=self._name, daemon=True)
         self._thread.start()
 

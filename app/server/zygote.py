@@ -4,12 +4,14 @@ A session process spent about 2.3 s importing numpy, scipy, trame and vtk and 1 
 target before it could listen, and held its own copy of all of it and of the compiled kernels its
 first frame loaded. The zygote does that once (its kernels on numba's fork-safe workqueue
 threads, see :func:`warm_up`), freezes the objects it made out of the garbage collector's reach
-(``gc.freeze``: their pages stay shared) and then, for each line
-``spawn TOKEN`` on its stdin, forks a session: the child builds its own app (state, server,
-pipeline) on the shared modules and target and serves as ``python -m app --shared --token-stdin``
-would, printing ``lmapd-sim app: http://127.0.0.1:PORT/?token=TOKEN`` once it listens. The zygote
-prints ``lmapd-sim zygote: forked PID for TOKEN-DIGEST`` first (the digest: sha256 of the token,
-16 hex digits), so that the launcher knows the process of each token.
+(``gc.freeze``: their pages stay shared) and then, for each line ``spawn TOKEN`` on its stdin,
+forks a session. The app itself (its page, state, logic and pipelines, its first frame computed)
+is built once too, before the first fork: each child serves its own copy of it as ``python -m app
+--shared --token-stdin`` would, printing ``lmapd-sim app: http://127.0.0.1:PORT/?token=TOKEN``
+once it listens (a new session then takes about 0.2 s to its first frame, against 0.6-0.9 s when
+each built its own app and frame: docs/serving.md). The zygote prints ``lmapd-sim zygote:
+forked PID for TOKEN-DIGEST`` first (the digest: sha256 of the token, 16 hex digits), so that the
+launcher knows the process of each token.
 
 A child stops with SIGTERM (as a session does) and when the zygote dies (the kernel's parent-death
 signal); the zygote stops its children and exits when its stdin closes (the launcher is gone) or
@@ -106,6 +108,14 @@ def main(argv: list[str] | None = None) -> int:
                 children.discard(pid)
         raise SystemExit(0)
 
+    # the sessions' app (its page, state and logic), built once: about 0.45 s of a session's
+    # start on this project's 2-core machine, most of it trame's building of the page
+    app = app_main.LmapdApp(
+        scene,
+        engine=Engine(scene, model, budget, shared),
+        previews=not args.no_preview,
+        studies_dir=args.studies,
+    )
     signal.signal(signal.SIGCHLD, reap)
     signal.signal(signal.SIGTERM, stop)
     gc.collect()
@@ -121,28 +131,20 @@ def main(argv: list[str] | None = None) -> int:
             signal.signal(signal.SIGCHLD, signal.SIG_DFL)
             signal.signal(signal.SIGTERM, signal.SIG_DFL)
             _die_with_parent()
-            os._exit(
-                _serve(app_main, args, scene, Engine(scene, model, budget, shared), token, budget)
-            )
+            os._exit(_serve(app, args, token, budget))
         children.add(pid)
         print(f"lmapd-sim zygote: forked {pid} for {digest(token)}", flush=True)
     stop()
     return 0
 
 
-def _serve(app_main, args, scene, engine, token: str, budget: int) -> int:
-    """A forked session: the app on its own server until SIGTERM (as ``python -m app --shared
-    --token-stdin`` runs it); its exit status."""
+def _serve(app, args, token: str, budget: int) -> int:
+    """A forked session: ``app`` (the parent's, now this process's own copy) on its own server
+    until SIGTERM (as ``python -m app --shared --token-stdin`` runs it); its exit status."""
     from app.server import process  # noqa: PLC0415  (after the version check, as app_main)
 
     try:
         sys.stdin.close()  # the zygote's: the launcher's spawn lines are not for the session
-        app = app_main.LmapdApp(
-            scene,
-            engine=engine,
-            previews=not args.no_preview,
-            studies_dir=args.studies,
-        )
         app.token = token
         signal.signal(signal.SIGTERM, process.interrupt)
         process.limit_address_space(budget + process.HEADROOM_BYTES)

@@ -3,6 +3,10 @@ stale results, reports errors as outcomes and keeps working after them."""
 
 from __future__ import annotations
 
+import json
+import os
+import select
+import signal
 import threading
 import time
 
@@ -246,3 +250,36 @@ def test_after_a_pause_an_overtaken_request_is_dropped_not_shown_as_an_interim_f
         runner.close()
     assert [o.value for o in delivered] == ["before", "last move"]
     assert not any(o.interim for o in delivered) and runner.n_dropped == 1
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="fork is POSIX's")
+def test_a_runner_in_a_forked_process_starts_its_own_worker():
+    """The app's sessions are forked from a parent that built their app, runner included; the
+    runner's worker thread stays behind in the parent, so the child's first request starts a
+    worker of its own (not counted as a restart: nothing died), and is served."""
+    got: list = []
+    runner = Runner(lambda x: x * 10, got.append, debounce_s=0.0)
+    try:
+        read, write = os.pipe()
+        pid = os.fork()
+        if pid == 0:  # the child: its answer through the pipe, then out (never pytest's exit)
+            try:
+                os.close(read)
+                runner.submit(4)
+                served = runner.wait_idle(30)
+                answer = [served, [o.value for o in got], runner.n_restarts]
+                os.write(write, json.dumps(answer).encode())
+            finally:
+                os._exit(0)
+        os.close(write)
+        with os.fdopen(read) as pipe:
+            ready = select.select([pipe], [], [], 60.0)[0]  # a hung child writes nothing
+            answer = json.loads(pipe.read()) if ready else None
+        if answer is None:
+            os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)
+        assert answer == [True, [40], 0]
+        runner.submit(5)  # the parent's own worker still serves
+        assert runner.wait_idle(30) and [o.value for o in got] == [50]
+    finally:
+        runner.close()

@@ -46,6 +46,11 @@ class DesignStudies:
         )
         state.change(*STATE_KEYS)(self.select)
 
+    def refresh(self) -> None:
+        """List the study folders again (a session forked from the app built at launch: the
+        studies written since)."""
+        self.state.design_studies = self.names()
+
     def names(self) -> list[str]:
         """The study folders (those holding a study.toml), by name."""
         if self.folder is None or not self.folder.is_dir():

@@ -146,6 +146,7 @@ def _serve(app, args, token: str, budget: int) -> int:
     try:
         sys.stdin.close()  # the zygote's: the launcher's spawn lines are not for the session
         app.token = token
+        app.logic.studies.refresh()  # the study folders written since the app was built
         signal.signal(signal.SIGTERM, process.interrupt)
         process.limit_address_space(budget + process.HEADROOM_BYTES)
         return process.serve_until_stopped(lambda: app.start(args.host, args.port), args)

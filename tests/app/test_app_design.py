@@ -51,6 +51,23 @@ def test_the_studies_folder_lists_its_studies_only(app):
     assert "design_study" in client_keys()
 
 
+def test_a_refresh_lists_the_studies_written_since_the_app_was_built(app, studies):
+    """A session forked from the app built at launch (app.server.zygote) lists the study
+    folders again as it starts."""
+    folder = studies[0] / "later"
+    folder.mkdir()
+    (folder / "study.toml").write_text((studies[0] / "energy" / "study.toml").read_text())
+    try:
+        assert app.state.design_studies == ["energy"]
+        app.logic.studies.refresh()
+        assert app.state.design_studies == ["energy", "later"]
+    finally:
+        (folder / "study.toml").unlink()
+        folder.rmdir()
+        app.logic.studies.refresh()
+    assert app.state.design_studies == ["energy"]
+
+
 def test_a_chosen_study_draws_its_front_and_designs_the_winner_first(app, studies):
     result = studies[1]
     change(app, design_study="energy")

@@ -13,9 +13,10 @@ MIB = 2**20
 # the default session cap is derived from it.
 SESSION_RSS_BYTES = 370 * MIB
 # A session forked from the zygote (the default on Linux): 30 such sessions and their parent held
-# 3,018 MB of proportional set size after each one's first 256 x 256 frame (101 MB a session,
-# the parent's share included; 7,112 MB as processes of their own; they share the parent's
-# target stage: scripts/bench_session_memory.py, 2026-11-26); counted at 128 MB.
+# 2,309 MB of proportional set size after each computed a 256 x 256 frame of its own (77 MB a
+# session, the parent's share included; 7,112 MB as processes of their own; they share the
+# parent's app, target stage and first frame: scripts/bench_session_memory.py --moved,
+# 2026-11-26); counted at 128 MB, room for a larger frame's caches.
 FORKED_SESSION_BYTES = 128 * MIB
 MAX_DEFAULT_SESSIONS = 30  # a class
 MEMORY_SHARE = 0.75  # of the memory available at start, for the children together

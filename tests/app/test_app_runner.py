@@ -3,14 +3,12 @@ stale results, reports errors as outcomes and keeps working after them."""
 
 from __future__ import annotations
 
-import json
 import os
-import select
-import signal
 import threading
 import time
 
 import pytest
+from support.fork import in_forked_child
 
 from app.runner import Outcome, Runner, StaleRequest
 
@@ -260,24 +258,13 @@ def test_a_runner_in_a_forked_process_starts_its_own_worker():
     got: list = []
     runner = Runner(lambda x: x * 10, got.append, debounce_s=0.0)
     try:
-        read, write = os.pipe()
-        pid = os.fork()
-        if pid == 0:  # the child: its answer through the pipe, then out (never pytest's exit)
-            try:
-                os.close(read)
-                runner.submit(4)
-                served = runner.wait_idle(30)
-                answer = [served, [o.value for o in got], runner.n_restarts]
-                os.write(write, json.dumps(answer).encode())
-            finally:
-                os._exit(0)
-        os.close(write)
-        with os.fdopen(read) as pipe:
-            ready = select.select([pipe], [], [], 60.0)[0]  # a hung child writes nothing
-            answer = json.loads(pipe.read()) if ready else None
-        if answer is None:
-            os.kill(pid, signal.SIGKILL)
-        os.waitpid(pid, 0)
+
+        def child() -> list:
+            runner.submit(4)
+            served = runner.wait_idle(30)
+            return [served, [o.value for o in got], runner.n_restarts]
+
+        answer = in_forked_child(child)
         assert answer == [True, [40], 0]
         runner.submit(5)  # the parent's own worker still serves
         assert runner.wait_idle(30) and [o.value for o in got] == [50]

@@ -7,6 +7,8 @@ The checks are orders of events and counts of bytes and elements, never times.""
 
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 import pytest
 from support.launch import wait_first_frame, wait_settled
 
@@ -41,6 +43,23 @@ VIEW_CLEARS = """() => {
 RESOURCES = """() => performance.getEntriesByType('resource')
   .filter((r) => r.initiatorType === 'script' || r.name.endsWith('.js'))
   .map((r) => ({ name: r.name, start: r.startTime, bytes: r.encodedBodySize }))"""
+
+
+@contextmanager
+def second_tab_logging_clears(page, app_url):
+    """A second tab of the app (its WebGL clears logged: ``CLEAR_LOG``), opened once the first
+    has settled (the scene's frame is ready), up to its first frame; closed after."""
+    page.goto(app_url)
+    wait_first_frame(page)
+    wait_settled(page)
+    other = page.context.new_page()
+    try:
+        other.add_init_script(CLEAR_LOG)
+        other.goto(app_url)
+        wait_first_frame(other)
+        yield other
+    finally:
+        other.close()
 
 
 def test_the_charts_library_loads_after_the_first_frame_and_the_charts_draw(page, app_url):
@@ -80,21 +99,12 @@ def test_the_first_frame_is_shown_only_after_each_view_drew_it_at_its_size(page,
     views exist; vtk.js first renders a new view empty at 300 x 300 pixels, then at its own
     size with the frame's data. The frame is logged (and reported to the server's pacing) after
     both views drew it at their size (app/static/frame.js), never after the empty renders."""
-    page.goto(app_url)
-    wait_first_frame(page)
-    wait_settled(page)
-    other = page.context.new_page()  # a second tab: the scene's frame is ready
-    try:
-        other.add_init_script(CLEAR_LOG)
-        other.goto(app_url)
-        wait_first_frame(other)
+    with second_tab_logging_clears(page, app_url) as other:
         first = other.evaluate("() => window.lmapdFrames[0]")
         assert first["key"][0] == "g" and first["applied"] < first["t"], first
         for view in other.evaluate(VIEW_CLEARS):
             assert view["size"] != "300x300" and "300x300" in view["sizes"], view
             assert view["drawnBefore"], view
-    finally:
-        other.close()
 
 
 def test_each_view_draws_the_first_frame_once_at_its_size(page, app_url):
@@ -103,19 +113,10 @@ def test_each_view_draws_the_first_frame_once_at_its_size(page, app_url):
     both views once more with the same picture (with WebGL in software, about 0.15 s of a new
     tab's first picture). The page calls it off (app/static/frame.js, setCamera): up to the
     first frame on screen, each view has drawn at its size once."""
-    page.goto(app_url)
-    wait_first_frame(page)
-    wait_settled(page)
-    other = page.context.new_page()  # a second tab: the scene's frame is ready
-    try:
-        other.add_init_script(CLEAR_LOG)
-        other.goto(app_url)
-        wait_first_frame(other)
+    with second_tab_logging_clears(page, app_url) as other:
         wait_settled(other)
         for view in other.evaluate(VIEW_CLEARS):
             assert view["sizedBefore"] == 1, view
-    finally:
-        other.close()
 
 
 # when the first of each selector's elements appeared in the page [ms, page clock]

@@ -6,13 +6,12 @@ from __future__ import annotations
 
 import json
 import os
-import select
-import signal
 import subprocess
 import sys
 
 import numpy as np
 import pytest
+from support.fork import in_forked_child
 
 import simcore
 from simcore import parallel
@@ -127,22 +126,7 @@ def test_a_process_forked_after_the_pool_ran_gets_a_pool_of_its_own():
     parallel.set_threads(2)
     try:
         assert parallel.map_threads(lambda x: x * x, [1, 2, 3]) == [1, 4, 9]  # the pool made
-        read, write = os.pipe()
-        pid = os.fork()
-        if pid == 0:  # the child: its answer through the pipe, then out (never pytest's exit)
-            try:
-                os.close(read)
-                answer = parallel.map_threads(lambda x: x + 1, [1, 2, 3])
-                os.write(write, json.dumps(answer).encode())
-            finally:
-                os._exit(0)
-        os.close(write)
-        with os.fdopen(read) as pipe:
-            ready = select.select([pipe], [], [], 60.0)[0]  # a hung child writes nothing
-            answer = json.loads(pipe.read()) if ready else None
-        if answer is None:
-            os.kill(pid, signal.SIGKILL)
-        os.waitpid(pid, 0)
+        answer = in_forked_child(lambda: parallel.map_threads(lambda x: x + 1, [1, 2, 3]))
         assert answer == [2, 3, 4]
     finally:
         parallel.set_threads(parallel.default_threads())

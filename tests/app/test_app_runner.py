@@ -3,7 +3,6 @@ stale results, reports errors as outcomes and keeps working after them."""
 
 from __future__ import annotations
 
-import os
 import threading
 import time
 
@@ -250,7 +249,6 @@ def test_after_a_pause_an_overtaken_request_is_dropped_not_shown_as_an_interim_f
     assert not any(o.interim for o in delivered) and runner.n_dropped == 1
 
 
-@pytest.mark.skipif(not hasattr(os, "fork"), reason="fork is POSIX's")
 def test_a_runner_in_a_forked_process_starts_its_own_worker():
     """The app's sessions are forked from a parent that built their app, runner included; the
     runner's worker thread stays behind in the parent, so the child's first request starts a

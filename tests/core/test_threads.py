@@ -118,7 +118,6 @@ def test_the_monte_carlo_gives_the_same_stops_at_1_2_and_3_threads():
         np.testing.assert_array_equal(getattr(exact[0], name), getattr(exact[1], name))
 
 
-@pytest.mark.skipif(not hasattr(os, "fork"), reason="fork is POSIX's")
 def test_a_process_forked_after_the_pool_ran_gets_a_pool_of_its_own():
     """The app's sessions are forked from a parent that computed their first frame on the
     pool's threads; threads do not survive a fork, so the child's first parallel call must make

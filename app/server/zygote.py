@@ -50,12 +50,11 @@ def warm_up(scene, model):
 
     Then computes the app's first frame of the scene (``model``: its target; the frame at the
     controls a page starts with, app.logic.scene_map.first_scene) on the same pipeline, and
-    returns it: its target
-    stage (the mesh, its parts and the ray-casting structure, read-only once built) is every
-    forked session's, so that no session builds its own (the MRO's: 10-20 MB of BVH and 9 MB of
-    arrays, twice a session with its previews); its other stages are each session's first
-    frame, which a session then only turns into its views (a class opening the printed address
-    together starts many sessions at once: each would compute the same frame)."""
+    returns it: its target stage (the mesh, its parts and the ray-casting structure, read-only
+    once built) is every forked session's, so that no session builds its own (the MRO's: 10-20
+    MB of BVH and 9 MB of arrays, twice a session with its previews); its other stages are each
+    session's first frame, which a session then only turns into its views (a class opening the
+    printed address together starts many sessions at once: each would compute the same frame)."""
     import simcore  # noqa: PLC0415
     from app.engine import Engine  # noqa: PLC0415
     from app.logic.scene_map import first_scene  # noqa: PLC0415

@@ -65,7 +65,11 @@ def second_tab_logging_clears(page, app_url):
 def test_the_charts_library_loads_after_the_first_frame_and_the_charts_draw(page, app_url):
     page.goto(app_url)
     wait_first_frame(page)
-    page.wait_for_selector(".waveform-box .js-plotly-plot .scatterlayer .trace", timeout=120_000)
+    # a drawn trace (on the shared test server an earlier test may leave a pixel selected whose
+    # echo is empty: its trace, first in the chart, has nothing to draw)
+    page.wait_for_selector(
+        ".waveform-box .js-plotly-plot .scatterlayer .trace >> visible=true", timeout=120_000
+    )
     page.wait_for_selector(".snr-box .js-plotly-plot", timeout=120_000)
     first = page.evaluate("() => window.lmapdFrames[0].t")
     charts = page.evaluate("() => window.lmapdCharts")

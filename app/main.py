@@ -23,6 +23,7 @@ from app.logic import flyaround, parts, studies
 from app.logic.controller import AppLogic
 from app.server import connections, security
 from app.server.addresses import public_lines, start_message, trame_arguments
+from app.server.children import say
 from app.server.process import (
     HEADROOM_BYTES,
     interrupt,
@@ -102,8 +103,7 @@ class LmapdApp:
     def _announce(self, **_) -> None:
         host = self.server.server_options.host
         lines = start_message(host, self.server.port, self.token)
-        for line in lines + public_lines(self.origins, self.token):
-            print(line, flush=True)
+        say(*lines, *public_lines(self.origins, self.token))
 
 
 def client_keys() -> dict[str, security.Screen]:

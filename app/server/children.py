@@ -34,6 +34,18 @@ CHILD_HOST = "127.0.0.1"
 ZYGOTE_READY = "lmapd-sim zygote: ready"  # what app.server.zygote prints once it can fork
 
 
+def say(*lines: str) -> None:
+    """Print each line to stdout in one write. The zygote and the sessions it forks share one
+    pipe to the launcher, and ``print`` writes a line and its newline apart when stdout is
+    unbuffered (``PYTHONUNBUFFERED``, as the launcher starts the zygote): two processes printing
+    at once then merged their lines, and the launcher, missing a line, waited ``start_timeout_s``
+    (120 s) for a session that was listening. A write of a line to a pipe is never split
+    (up to ``PIPE_BUF``, 4 KB on Linux)."""
+    for line in lines:
+        sys.stdout.write(line + "\n")
+        sys.stdout.flush()
+
+
 def token_digest(token: str) -> str:
     """How app.server.zygote names a session's token in its output (never the token itself)."""
     return hashlib.sha256(token.encode()).hexdigest()[:16]

@@ -14,6 +14,7 @@ from collections.abc import Callable
 
 import simcore
 from app.server.addresses import public_lines, start_message
+from app.server.children import say
 
 
 def read_token_and_watch_stdin() -> str:
@@ -100,16 +101,15 @@ def run_launcher(args: argparse.Namespace) -> int:
     )
 
     def announce(port: int) -> None:
-        for line in start_message(args.host, port, token) + public_lines(origins, token):
-            print(line, flush=True)
-        print(
+        say(
+            *start_message(args.host, port, token),
+            *public_lines(origins, token),
             f"lmapd-sim app: each tab its own session: at most {caps.max_sessions} at once, "
             f"{caps.memory_cap_bytes / mib:,.0f} MB for their processes, a closed page's session "
             f"ends after {caps.idle_s:g} s, one without input after "
             f"{caps.input_idle_s / 60:g} min (--shared: one scene for every tab)",
-            flush=True,
+            class_line(caps),
         )
-        print(class_line(caps), flush=True)
 
     return serve_until_stopped(
         lambda: asyncio.run(launcher.serve(door, args.host, args.port, announce)), args

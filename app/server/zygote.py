@@ -27,6 +27,7 @@ import signal
 import sys
 
 from app.server.children import ZYGOTE_READY as READY
+from app.server.children import say
 from app.server.children import token_digest as digest
 
 PR_SET_PDEATHSIG = 1  # prctl(2)
@@ -119,7 +120,7 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, stop)
     gc.collect()
     gc.freeze()  # the modules' and the target's objects: never written by the collector
-    print(READY, flush=True)
+    say(READY)
     for line in sys.stdin:
         words = line.split()
         if len(words) != 2 or words[0] != "spawn":
@@ -132,7 +133,7 @@ def main(argv: list[str] | None = None) -> int:
             _die_with_parent()
             os._exit(_serve(app, args, token, budget))
         children.add(pid)
-        print(f"lmapd-sim zygote: forked {pid} for {digest(token)}", flush=True)
+        say(f"lmapd-sim zygote: forked {pid} for {digest(token)}")
     stop()
     return 0
 

@@ -838,3 +838,40 @@ def test_refusals_are_logged_a_few_a_window_and_the_held_back_ones_counted(caplo
         assert short.warning("token", "refused %d", 100) is True
     lines = [r.getMessage() for r in caplog.records]
     assert len(lines) == 5 and lines[-1] == "refused 100 (97 more like it not logged)"
+
+
+# Processes sharing one unbuffered stdout pipe print many long lines at once, as the zygote and
+# the sessions it forks do at a class's start (they print how each can be reached).
+SHARED_PIPE_WRITERS = """
+import os, sys
+from app.server.children import say
+n_procs, n_lines = int(sys.argv[1]), int(sys.argv[2])
+for k in range(n_procs):
+    if os.fork() == 0:
+        for i in range(n_lines):
+            say(f"writer {k} line {i} " + "x" * 200 + " end")
+        os._exit(0)
+for _ in range(n_procs):
+    os.wait()
+"""
+
+
+def test_processes_sharing_a_pipe_print_whole_lines():
+    """app.server.children.say writes a line and its newline at once: ``print`` under
+    PYTHONUNBUFFERED (as the launcher runs the zygote) writes them apart, so lines of processes
+    printing together merged and the launcher, missing a session's line, waited 120 s for it."""
+    n_procs, n_lines = 6, 400
+    done = subprocess.run(
+        [sys.executable, "-c", SHARED_PIPE_WRITERS, str(n_procs), str(n_lines)],
+        cwd=Path(__file__).resolve().parents[2],
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=True,
+    )
+    lines = done.stdout.splitlines()
+    whole = re.compile(r"^writer (\d+) line (\d+) x{200} end$")
+    broken = [line for line in lines if not whole.match(line)]
+    assert not broken, broken[:3]
+    assert len(lines) == n_procs * n_lines

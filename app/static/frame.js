@@ -27,9 +27,30 @@
   setTimeout(controlsReady, CONTROLS_LATEST_S * 1000);
   const sizeOf = (canvas) => `${canvas.width}x${canvas.height}`;
   const getContext = HTMLCanvasElement.prototype.getContext;
-  HTMLCanvasElement.prototype.getContext = function (type, ...rest) {
-    const gl = getContext.call(this, type, ...rest);
-    if (gl && String(type).startsWith('webgl') && !clears.has(this)) {
+  // WebGL drawn in software (a browser without a usable GPU: SwiftShader, Mesa's llvmpipe)
+  // draws the views without multisampling: there antialiasing is the views' costliest option
+  // (a new tab's first picture 0.24 s later on this project's 2-core machine: docs/serving.md),
+  // while a GPU does it for next to nothing, so it stays on there. Which one this browser has
+  // is read once, from a context of its own, before the views' first context; a browser that
+  // does not say (no WEBGL_debug_renderer_info) keeps the default.
+  const SOFTWARE_GL = /swiftshader|llvmpipe|softpipe|software|basic render/i;
+  let software = null;
+  const softwareGL = () => {
+    if (software === null) {
+      const probe = getContext.call(document.createElement('canvas'), 'webgl');
+      const info = probe && probe.getExtension('WEBGL_debug_renderer_info');
+      const renderer = info ? String(probe.getParameter(info.UNMASKED_RENDERER_WEBGL)) : '';
+      software = SOFTWARE_GL.test(renderer);
+      const lose = probe && probe.getExtension('WEBGL_lose_context');
+      if (lose) lose.loseContext();
+    }
+    return software;
+  };
+  HTMLCanvasElement.prototype.getContext = function (type, options, ...rest) {
+    const webgl = String(type).startsWith('webgl');
+    if (webgl && softwareGL()) options = { ...(options || {}), antialias: false };
+    const gl = getContext.call(this, type, options, ...rest);
+    if (gl && webgl && !clears.has(this)) {
       const canvas = this, clear = gl.clear;
       clears.set(canvas, { t: 0, size: '' });
       gl.clear = (...args) => {
@@ -42,6 +63,7 @@
 
   window.trame.utils.lmapd = {
     page,  // { controls }: read by the drawer's template (app.ui.controls.CONTROLS_READY)
+    softwareGL,  // whether this browser draws WebGL in software (its views then unsmoothed)
     pending: [],  // frames applied and not yet reported: { key, applied }
     // the views' last clears ([] until every view has a context)
     viewClears() {

@@ -148,3 +148,37 @@ def test_the_panels_below_the_views_are_built_after_the_first_frame(page, app_ur
     assert appeared[".scene-card"] < shown, appeared
     for later in (".controls", ".array-card", ".waveform-card", ".stats-card"):
         assert appeared[later] >= shown, (later, appeared, shown)
+
+
+VIEW_CONTEXTS = """() => ({
+  software: window.trame.utils.lmapd.softwareGL(),
+  antialias: ['scene_view', 'cloud_view'].map((ref) => window.trame.refs[ref].$.provides.view
+    .openglRenderWindow.getContext().getContextAttributes().antialias),
+})"""
+
+# a browser whose WebGL names a GPU (the test's Chromium draws in software, SwiftShader)
+A_GPU = """(() => {
+  for (const proto of [WebGLRenderingContext.prototype, WebGL2RenderingContext.prototype]) {
+    const getParameter = proto.getParameter;
+    proto.getParameter = function (name) {
+      return name === 0x9246  // UNMASKED_RENDERER_WEBGL
+        ? 'ANGLE (NVIDIA, NVIDIA GeForce RTX 3060 Direct3D11 vs_5_0 ps_5_0, D3D11)'
+        : getParameter.call(this, name);
+    };
+  }
+})()"""
+
+
+def test_views_drawn_in_software_are_not_multisampled(page, app_url):
+    """WebGL in software (this test's Chromium: SwiftShader) draws the views without
+    antialiasing, its costliest option there (app/static/frame.js; docs/serving.md)."""
+    page.goto(app_url)
+    wait_first_frame(page)
+    assert page.evaluate(VIEW_CONTEXTS) == {"software": True, "antialias": [False, False]}
+
+
+def test_views_drawn_on_a_gpu_keep_antialiasing(page, app_url):
+    page.add_init_script(A_GPU)
+    page.goto(app_url)
+    wait_first_frame(page)
+    assert page.evaluate(VIEW_CONTEXTS) == {"software": False, "antialias": [True, True]}

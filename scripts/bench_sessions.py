@@ -5,13 +5,16 @@ open (paper scene, 256 x 256, 1280 x 720 pages).
 
     .venv/bin/python scripts/bench_sessions.py [--tabs 1 5] [--open 10] [--repeats 3]
                                                [--modes fork process]
+                                               [--no-browser-settle]
 
 For each repeat, mode (sessions forked from the preloaded parent, the default on Linux, or a
 process each) and count of tabs: a launcher starts, its spare session is left to get ready,
 ``--open`` sessions are opened without a browser (as bench_session_memory.py does, each to its
 first frame) and the launcher's processes are left to go quiet (the next spare started), a
 browser context and page are opened for each tab (a student's browser, open before the class
-starts), then the tabs open the printed address at the same moment. Times are
+starts) and the browser is left to go quiet too, then the tabs open the printed address at the
+same moment (``--no-browser-settle``: at once, as this script did before 2026-11-27, when each
+new page's own start, about 0.7 s of CPU, ran into the timed seconds). Times are
 wall-clock seconds from that moment, measured here: the door's first answer (the response's
 headers and first words) and the first frame painted (the page logs it: window.lmapdFrames).
 Medians with their range over every tab of every repeat are printed; the one-minute load average
@@ -76,18 +79,41 @@ def _cpu_s(processes: list[psutil.Process]) -> float:
     return total
 
 
-async def _settled(launcher_pid: int, quiet_share: float = 0.05, window_s: float = 0.5) -> None:
-    """Wait until the launcher and its processes are quiet: under ``quiet_share`` of one core
-    over ``window_s`` (the open sessions' frames done and the next spare started)."""
+async def _quiet(processes, what: str, quiet_share: float = 0.05, window_s: float = 0.5) -> None:
+    """Wait until ``processes()`` use under ``quiet_share`` of one core over ``window_s``."""
     deadline = time.monotonic() + SPARE_WAIT_S
-    launcher = psutil.Process(launcher_pid)
     while time.monotonic() < deadline:
-        tree = [launcher, *launcher.children(recursive=True)]
+        tree = processes()
         before = _cpu_s(tree)
         await asyncio.sleep(window_s)
         if _cpu_s(tree) - before < quiet_share * window_s:
             return
-    raise RuntimeError("the sessions did not settle")
+    raise RuntimeError(f"{what} did not settle")
+
+
+async def _settled(launcher_pid: int) -> None:
+    """Wait until the launcher and its processes are quiet (the open sessions' frames done and
+    the next spare started)."""
+    launcher = psutil.Process(launcher_pid)
+    await _quiet(lambda: [launcher, *launcher.children(recursive=True)], "the sessions")
+
+
+def _browser_processes() -> list[psutil.Process]:
+    """The browser's processes (Chromium's, under the Playwright driver this script started)."""
+    found = []
+    for proc in psutil.Process().children(recursive=True):
+        try:
+            if "chrom" in proc.name().lower():
+                found.append(proc)
+        except psutil.Error:
+            pass
+    return found
+
+
+async def _browser_settled() -> None:
+    """Wait until the browser is quiet: a new page's process keeps starting (Playwright's own
+    scripts in it: about 0.7 s of CPU a page here) after ``new_page`` returns."""
+    await _quiet(_browser_processes, "the browser")
 
 
 async def _open_page(browser):
@@ -105,7 +131,9 @@ async def _one_tab(page, url: str, t0: float) -> tuple[float, float]:
     return answered[0] if answered else float("nan"), time.perf_counter() - t0
 
 
-async def one_round(browser, fork: bool, tabs: int, n_open: int) -> list[tuple[float, float]]:
+async def one_round(
+    browser, fork: bool, tabs: int, n_open: int, settle_browser: bool = True
+) -> list[tuple[float, float]]:
     mode = "--fork-sessions" if fork else "--process-sessions"
     args = (mode, "--max-sessions", str(n_open + tabs + 2))
     with app_process(sessions=True, app_args=args) as running:
@@ -116,6 +144,8 @@ async def one_round(browser, fork: bool, tabs: int, n_open: int) -> list[tuple[f
             held.append(client)
         await _settled(running.pid)  # a quiet machine with the sessions open
         opened = [await _open_page(browser) for _ in range(tabs)]
+        if settle_browser:
+            await _browser_settled()  # the students' browsers open and idle
         t0 = time.perf_counter()
         times = await asyncio.gather(*(_one_tab(page, running.url, t0) for _, page in opened))
         for context, _ in opened:
@@ -141,7 +171,9 @@ async def main_async(args) -> int:
             for mode in args.modes:
                 for tabs in args.tabs:
                     loads.append(os.getloadavg()[0])
-                    times = await one_round(browser, mode == "fork", tabs, args.open)
+                    times = await one_round(
+                        browser, mode == "fork", tabs, args.open, args.browser_settle
+                    )
                     results.setdefault((mode, tabs), []).extend(times)
                     print(
                         f"{mode}, {tabs} tab(s), {args.open} open: "
@@ -165,6 +197,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--open", type=int, default=0, help="sessions open before the tabs")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--modes", nargs="+", choices=("fork", "process"), default=["fork"])
+    parser.add_argument(
+        "--no-browser-settle",
+        dest="browser_settle",
+        action="store_false",
+        help="open the tabs as soon as their pages exist, not once the browser is quiet",
+    )
     args = parser.parse_args(argv)
     problem = chromium_missing_message()
     if problem:

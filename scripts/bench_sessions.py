@@ -15,8 +15,9 @@ browser context and page are opened for each tab (a student's browser, open befo
 starts) and the browser is left to go quiet too, then the tabs open the printed address at the
 same moment (``--no-browser-settle``: at once, as this script did before 2026-11-27, when each
 new page's own start, about 0.7 s of CPU, ran into the timed seconds). Times are
-wall-clock seconds from that moment, measured here: the door's first answer (the response's
-headers and first words) and the first frame painted (the page logs it: window.lmapdFrames).
+wall-clock seconds from that moment: the door's first answer (the response's headers and first
+words), measured here, and the first frame painted, at the time the page logged it
+(window.lmapdFrames, on the page's clock).
 Medians with their range over every tab of every repeat are printed; the one-minute load average
 is printed beside them (the machine must be quiet for these times to mean anything).
 """
@@ -48,6 +49,7 @@ from support.launch import (
 
 SPARE_WAIT_S = 120.0
 FRAME_WAIT_S = 300.0
+POLL_MS = 100  # how often a tab's page is asked whether its first frame is on screen
 
 
 def _listening(proc: psutil.Process) -> bool:
@@ -122,13 +124,18 @@ async def _open_page(browser):
     return context, await context.new_page()
 
 
-async def _one_tab(page, url: str, t0: float) -> tuple[float, float]:
-    """(s to the door's first answer, s to the first frame painted), both from ``t0``."""
+async def _one_tab(page, url: str, t0: float, epoch0: float) -> tuple[float, float]:
+    """(s to the door's first answer, s to the first frame painted), both from ``t0`` (the same
+    moment as ``epoch0``, the system clock's seconds). The first frame's time is the one the
+    page logged (its clock: ``performance.timeOrigin``, system-clock milliseconds), not the
+    moment this script next looked: the wait looks every ``POLL_MS`` (Playwright's default, at
+    every animation frame, kept each page drawing frames while it loaded)."""
     answered: list[float] = []
     page.on("response", lambda _r: answered or answered.append(time.perf_counter() - t0))
     await page.goto(url, wait_until="commit")
-    await page.wait_for_function(JS_FRAMES + " > 0", timeout=FRAME_WAIT_S * 1000)
-    return answered[0] if answered else float("nan"), time.perf_counter() - t0
+    await page.wait_for_function(JS_FRAMES + " > 0", timeout=FRAME_WAIT_S * 1000, polling=POLL_MS)
+    shown_ms = await page.evaluate("() => performance.timeOrigin + window.lmapdFrames[0].t")
+    return answered[0] if answered else float("nan"), shown_ms / 1000 - epoch0
 
 
 async def one_round(
@@ -146,8 +153,10 @@ async def one_round(
         opened = [await _open_page(browser) for _ in range(tabs)]
         if settle_browser:
             await _browser_settled()  # the students' browsers open and idle
-        t0 = time.perf_counter()
-        times = await asyncio.gather(*(_one_tab(page, running.url, t0) for _, page in opened))
+        t0, epoch0 = time.perf_counter(), time.time()
+        times = await asyncio.gather(
+            *(_one_tab(page, running.url, t0, epoch0) for _, page in opened)
+        )
         for context, _ in opened:
             await context.close()
         for client in held:

@@ -40,6 +40,7 @@ class SoakReport:
     server_alive: bool = False
     final_points_page: tuple = ()  # (points, target points, outliers, pixels per side)
     final_points_expected: tuple = (None,)
+    final_page: dict = field(default_factory=dict)  # what the page held then (FINAL_PAGE)
     two_clients_points: list[tuple] = field(default_factory=list)
     two_clients_expected: tuple = (None,)
     elapsed_s: float = 0.0
@@ -70,7 +71,8 @@ class SoakReport:
             f"(growth {self.rss_growth_mb:+.1f} MB)",
             f"final state shown: {'yes' if self.final_state_ok else 'NO'} "
             f"(page {self.final_points_page}, expected {self.final_points_expected}: "
-            "points, target points, outliers, pixels per side)",
+            "points, target points, outliers, pixels per side)"
+            + ("" if self.final_state_ok else f"; the page held {self.final_page}"),
             f"two clients at once: {'both correct' if self.two_clients_ok else 'WRONG'} "
             f"(pages {self.two_clients_points}, expected {self.two_clients_expected})",
             f"total {self.elapsed_s:.1f} s",
@@ -117,6 +119,22 @@ def point_count(page) -> tuple[int, int, int, int]:
     shown = int(page.locator(".point-count").inner_text().split()[0].replace(",", ""))
     state = [page.evaluate(JS_STATE, k) for k in ("n_target_points", "n_outliers", "array_image")]
     return shown, int(state[0]), int(state[1]), int(state[2]["pixels"])
+
+
+# what a page holds besides its figures: its frame, its message, its last frames logged and the
+# controls the expected figures are simulated from (a wrong final state then says which part)
+FINAL_PAGE = """(keys) => {
+  const s = window.trame.state;
+  return { frame_key: s.get('frame_key'), frame_kind: s.get('frame_kind'),
+           busy: s.get('busy'), error_message: s.get('error_message'),
+           frames: (window.lmapdFrames || []).slice(-4).map((f) => f.key),
+           controls: Object.fromEntries(keys.map((k) => [k, s.get(k)])) };
+}"""
+
+
+def final_page(page) -> dict:
+    """What the page holds now (``FINAL_PAGE``), for a report."""
+    return page.evaluate(FINAL_PAGE, list(STATE_KEYS))
 
 
 def expected_points(page) -> tuple[int, int, int, int]:
@@ -184,6 +202,7 @@ def run_soak(browser, url: str, n_changes: int = 300, settle_timeout_s: float = 
         report.rss_after_mb = rss_mb(pid)
         report.final_points_page = point_count(page)
         report.final_points_expected = expected_points(page)
+        report.final_page = final_page(page)
 
         second = browser.new_context(viewport=viewport)
         other = second.new_page()

@@ -29,10 +29,10 @@
   const getContext = HTMLCanvasElement.prototype.getContext;
   // WebGL drawn in software (a browser without a usable GPU: SwiftShader, Mesa's llvmpipe)
   // draws the views without multisampling: there antialiasing is the views' costliest option
-  // (a new tab's first picture 0.24 s later on this project's 2-core machine: docs/serving.md),
-  // while a GPU does it for next to nothing, so it stays on there. Which one this browser has
-  // is read once, from a context of its own, before the views' first context; a browser that
-  // does not say (no WEBGL_debug_renderer_info) keeps the default.
+  // (a new tab's first picture about 0.2-0.3 s later on this project's 2-core machine:
+  // docs/serving.md), while a GPU does it for next to nothing, so it stays on there. Which one
+  // this browser has is read once, from a context of its own, before the views' first context;
+  // a browser that does not say (no WEBGL_debug_renderer_info) keeps the default.
   const SOFTWARE_GL = /swiftshader|llvmpipe|softpipe|software|basic render/i;
   let software = null;
   const softwareGL = () => {

@@ -31,6 +31,7 @@ import psutil
 import pytest
 from aiohttp import web
 from support.ci import skip_unless_ci
+from support.fork import require_fork
 from support.hostile_client import Client
 from support.launch import app_process
 
@@ -860,6 +861,7 @@ def test_processes_sharing_a_pipe_print_whole_lines():
     """app.server.children.say writes a line and its newline at once: ``print`` under
     PYTHONUNBUFFERED (as the launcher runs the zygote) writes them apart, so lines of processes
     printing together merged and the launcher, missing a session's line, waited 120 s for it."""
+    require_fork()
     n_procs, n_lines = 6, 400
     done = subprocess.run(
         [sys.executable, "-c", SHARED_PIPE_WRITERS, str(n_procs), str(n_lines)],

@@ -40,7 +40,7 @@ class SoakReport:
     server_alive: bool = False
     final_points_page: tuple = ()  # (points, target points, outliers, pixels per side)
     final_points_expected: tuple = (None,)
-    final_page: dict = field(default_factory=dict)  # what the page held then (FINAL_PAGE)
+    final_page: dict = field(default_factory=dict)  # what the page held then (PAGE_HELD)
     two_clients_points: list[tuple] = field(default_factory=list)
     two_clients_expected: tuple = (None,)
     elapsed_s: float = 0.0
@@ -123,7 +123,7 @@ def point_count(page) -> tuple[int, int, int, int]:
 
 # what a page holds besides its figures: its frame, its message, its last frames logged and the
 # controls the expected figures are simulated from (a wrong final state then says which part)
-FINAL_PAGE = """(keys) => {
+PAGE_HELD = """(keys) => {
   const s = window.trame.state;
   return { frame_key: s.get('frame_key'), frame_kind: s.get('frame_kind'),
            busy: s.get('busy'), error_message: s.get('error_message'),
@@ -132,15 +132,15 @@ FINAL_PAGE = """(keys) => {
 }"""
 
 
-def final_page(page) -> dict:
-    """What the page holds now (``FINAL_PAGE``), for a report."""
-    return page.evaluate(FINAL_PAGE, list(STATE_KEYS))
+def page_held(page) -> dict:
+    """What the page holds now (``PAGE_HELD``): its controls and, for a report, its frame."""
+    return page.evaluate(PAGE_HELD, list(STATE_KEYS))
 
 
-def expected_points(page) -> tuple[int, int, int, int]:
-    """The same figures for the page's current controls, simulated here (same scene, same
-    seed, so the same result)."""
-    raw = {key: page.evaluate(JS_STATE, key) for key in STATE_KEYS}
+def expected_points(page, raw: dict | None = None) -> tuple[int, int, int, int]:
+    """The same figures as ``point_count`` for the page's controls (``raw``: as ``page_held``
+    read them; else read now), simulated here (same scene, same seed, so the same result)."""
+    raw = page_held(page)["controls"] if raw is None else raw
     controls, _ = sanitize_controls(raw, Controls(materials=dict(raw.get("materials") or {})))
     scene = scene_from_controls(simcore.load_scene(), controls)
     result = simcore.Pipeline().run(scene)
@@ -201,8 +201,8 @@ def run_soak(browser, url: str, n_changes: int = 300, settle_timeout_s: float = 
         report.server_alive = alive(pid)
         report.rss_after_mb = rss_mb(pid)
         report.final_points_page = point_count(page)
-        report.final_points_expected = expected_points(page)
-        report.final_page = final_page(page)
+        report.final_page = page_held(page)
+        report.final_points_expected = expected_points(page, report.final_page["controls"])
 
         second = browser.new_context(viewport=viewport)
         other = second.new_page()

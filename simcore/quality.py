@@ -23,6 +23,8 @@ app asks for it. The model: docs/physics.md#imaging-quality.
 
 from __future__ import annotations
 
+import threading
+import weakref
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -37,6 +39,7 @@ if TYPE_CHECKING:
     from .pointcloud import PointCloud
     from .scene import Scene
     from .target import TargetModel
+    from .target_mesh import TargetMesh
 
 SURFACE_SAMPLES = 50_000  # area samples of the mesh for recall (those seen count)
 SEEN_SLACK_M = 1e-3  # a sample whose ray hits within this of it is seen (float32 ray distances)
@@ -87,6 +90,39 @@ def sample_facets(vertices_m, faces, face_ids, n: int, rng: np.random.Generator)
     return points, face_ids[pick], total
 
 
+# the whole mesh's area samples of recent seeds, per mesh: they do not depend on the pose, so a
+# series of frames of one target (an atlas, a slider drag) draws them once (read-only arrays)
+_SAMPLES: weakref.WeakKeyDictionary[TargetMesh, dict[tuple[int, int], tuple]] = (
+    weakref.WeakKeyDictionary()
+)
+_SAMPLES_KEPT = 4  # [-] seeds kept per mesh (about 1.6 MB each at 50,000 samples)
+_SAMPLES_LOCK = threading.Lock()
+
+
+def mesh_samples(model: TargetModel, seed: int, n: int = SURFACE_SAMPLES):
+    """The recall's ``n`` samples of the whole mesh for ``seed``: (n, 3) positions [m], (n,) facet
+    of each and the mesh's area [m^2], as :func:`sample_facets` draws them from the generator
+    ``default_rng([seed, 7411])``; drawn once per mesh and seed, then shared (read-only)."""
+    surface = model.surface
+    key = (int(seed), int(n))
+    with _SAMPLES_LOCK:
+        kept = _SAMPLES.setdefault(surface, {})
+        hit = kept.get(key)
+    if hit is not None:
+        return hit
+    rng = np.random.default_rng([seed, 7411])
+    every_face = np.arange(len(model.faces))
+    points_t, face, area = sample_facets(model.vertices_m, model.faces, every_face, n, rng)
+    points_t.setflags(write=False)
+    face.setflags(write=False)
+    drawn = (points_t, face, area)
+    with _SAMPLES_LOCK:
+        while len(kept) >= _SAMPLES_KEPT:
+            kept.pop(next(iter(kept)))
+        kept[key] = drawn
+    return drawn
+
+
 def seen_surface(
     caster: RayCaster,
     pose: PoseInSensor,
@@ -99,6 +135,17 @@ def seen_surface(
     view ``fov_rad`` and first along the ray from the lidar (within SEEN_SLACK_M)."""
     model = caster.model
     points_t, face, area = sample_facets(model.vertices_m, model.faces, face_ids, n, rng)
+    return seen_samples(caster, pose, fov_rad, points_t, face, area)
+
+
+def seen_samples(
+    caster: RayCaster, pose: PoseInSensor, fov_rad: float, points_t, face, area_m2: float
+) -> SurfaceSamples:
+    """Which of the surface samples ``points_t`` (n, 3) [m] (on facets ``face``, of total area
+    ``area_m2``) the lidar sees: inside the square field of view ``fov_rad`` and first along the
+    ray from the lidar (within SEEN_SLACK_M)."""
+    model = caster.model
+    area = area_m2
     if not len(points_t):
         return SurfaceSamples(points_t=points_t, face=face, seen=np.zeros(0, bool), area_m2=0.0)
     origin_t = -pose.rotation.T @ pose.translation_m
@@ -147,11 +194,9 @@ def near_mesh(points_t, model: TargetModel, tau_m: float, seen_faces) -> np.ndar
     near = point_to_mesh_m(points_t, vertices, faces[np.asarray(seen_faces)]) <= tau_m
     rest = np.flatnonzero(~near)
     if len(rest):
-        tri = vertices[faces]
-        lo, hi = tri.min(axis=1), tri.max(axis=1)
-        reach_m = tau_m + 0.5 * np.linalg.norm(hi - lo, axis=1)
-        d_m, _ = cKDTree(points_t[rest]).query(0.5 * (lo + hi), k=1)
-        could = d_m <= reach_m
+        centre_m, half_diagonal_m = model.surface.face_boxes
+        d_m, _ = cKDTree(points_t[rest]).query(centre_m, k=1)
+        could = d_m <= tau_m + half_diagonal_m
         near[rest] = point_to_mesh_m(points_t[rest], vertices, faces[could]) <= tau_m
     return near
 
@@ -197,9 +242,8 @@ def quality_metrics(
     target = ~np.asarray(attrs["is_outlier"], dtype=bool)
     points_t = to_target_frame(cloud.points[target], hits.pose)
     near = near_mesh(points_t, model, tau_m, hits.visible_faces)
-    rng = np.random.default_rng([seed, 7411])
-    every_face = np.arange(len(model.faces))
-    surface = seen_surface(caster, hits.pose, fov_rad, every_face, n_samples, rng)
+    points_s, face_s, area_m2 = mesh_samples(model, seed, n_samples)
+    surface = seen_samples(caster, hits.pose, fov_rad, points_s, face_s, area_m2)
     recalled = np.zeros(len(surface.face), dtype=bool)
     if len(points_t) and surface.seen.any():
         d_m, _ = cKDTree(points_t).query(surface.points_t[surface.seen], k=1)

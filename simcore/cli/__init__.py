@@ -14,6 +14,7 @@
     lmapd sweep SWEEP.toml --out DIR [--scheduler ADDRESS] [--workers N]
     lmapd design STUDY.toml --out DIR [--trials N] [--workers N | --scheduler ADDRESS] [--resume]
     lmapd compare [SCENE.toml] [--set NAME=VALUE ...] --out DIR [--quick] [--p-detect 0.95]
+    lmapd atlas [SCENE.toml] [--set NAME=VALUE ...] --out DIR [--step-deg 10] [--metric f_score]
 
 One module per subcommand (``add_parser`` registers it, ``run_cli`` runs it), ``common`` for what
 they share. Errors in the user's input (unknown key, value out of range, missing or broken file)
@@ -29,6 +30,7 @@ import sys
 
 from . import (
     app,
+    atlas,
     bench,
     compare,
     design,
@@ -57,6 +59,7 @@ SUBCOMMANDS = (
     sweep,
     design,
     compare,
+    atlas,
 )
 # commands after which the process ends without the interpreter's teardown (unloading numpy,
 # scipy and the rest takes ~0.1 s once the work is done): they leave no thread that must finish,

@@ -234,18 +234,26 @@ class _Submit:
 
 
 class _Serial(_Submit):
-    def __init__(self):
+    """The frames one after the other in this process, through one Pipeline: ``run`` is
+    ``run_frame``'s shape, ``(scene, pipeline, want_cloud) -> FrameOutcome``."""
+
+    def __init__(self, run=run_frame):
         self.pipeline = Pipeline()
+        self.run = run
 
     def __call__(self, frames, want_cloud):
         for frame in frames:
-            yield frame, run_frame(frame.scene, self.pipeline, want_cloud)
+            yield frame, self.run(frame.scene, self.pipeline, want_cloud)
 
 
 class _Dask(_Submit):
-    def __init__(self, client, n_workers: int):
+    """The frames as Dask tasks: ``task`` is ``_frame_task``'s shape, ``(scene, want_cloud) ->
+    FrameOutcome``, run by a worker through its own Pipeline."""
+
+    def __init__(self, client, n_workers: int, task=_frame_task):
         self.client = client
         self.n_workers = n_workers
+        self.task = task
 
     def __call__(self, frames, want_cloud):
         from distributed import as_completed  # noqa: PLC0415
@@ -255,7 +263,7 @@ class _Dask(_Submit):
         run = uuid.uuid4().hex[:8]  # task keys unique per run: a notebook may rerun a sweep
         for frame in frames:
             fut = self.client.submit(
-                _frame_task, frame.scene, want_cloud, key=f"lmapd-frame-{frame.frame_id}-{run}"
+                self.task, frame.scene, want_cloud, key=f"lmapd-frame-{frame.frame_id}-{run}"
             )
             by_key[fut.key] = frame
             futures.append(fut)
@@ -277,14 +285,19 @@ class _Dask(_Submit):
 
 
 class _Executor:
-    """Context manager: the frame runner, with any cluster it starts closed on exit."""
+    """Context manager: the frame runner, with any cluster it starts closed on exit.
 
-    def __init__(self, pending, workers, scheduler, client, timeout_s):
+    ``run`` and ``task`` are what one frame runs, in this process and on a Dask worker
+    (:class:`_Serial`, :class:`_Dask`): a sweep's frame by default."""
+
+    def __init__(self, pending, workers, scheduler, client, timeout_s, run=None, task=None):
         self.pending = pending
         self.workers = workers
         self.scheduler = scheduler
         self.client = client
         self.timeout_s = timeout_s
+        self.run = run or run_frame
+        self.task = task or _frame_task
         self.owned: list = []
 
     def __enter__(self) -> _Submit:
@@ -296,14 +309,14 @@ class _Executor:
 
     def _start(self) -> _Submit:
         if self.client is not None:
-            return _Dask(self.client, len(self.client.scheduler_info()["workers"]))
+            return _Dask(self.client, len(self.client.scheduler_info()["workers"]), self.task)
         if self.scheduler:
             client = _connect(self.scheduler, self.timeout_s)
             self.owned.append(client)
-            return _Dask(client, len(client.scheduler_info()["workers"]))
+            return _Dask(client, len(client.scheduler_info()["workers"]), self.task)
         n = (os.cpu_count() or 1) if self.workers is None else self.workers
         if n == 0 or not self.pending:
-            return _Serial()
+            return _Serial(self.run)
         n = min(n, len(self.pending))
         from distributed import Client, LocalCluster  # noqa: PLC0415  (slow import)
 
@@ -317,7 +330,7 @@ class _Executor:
         self.owned.append(cluster)
         client = Client(cluster)
         self.owned.append(client)
-        return _Dask(client, n)
+        return _Dask(client, n, self.task)
 
     def __exit__(self, *exc) -> None:
         for obj in reversed(self.owned):

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from .frame import COLUMNS, DEFAULT_METRIC, METRICS, attitude_row
 from .grid import DEFAULT_STEP_DEG, STEP_RANGE_DEG, AtlasError, AttitudeGrid, attitude_grid
+from .live import LIVE_LEVELS_DEG, Level, map_levels
 from .run import (
     FIGURE_NAME,
     MANIFEST_NAME,
@@ -31,6 +32,7 @@ __all__ = [
     "COLUMNS",
     "DEFAULT_METRIC",
     "DEFAULT_STEP_DEG",
+    "LIVE_LEVELS_DEG",
     "FIGURE_NAME",
     "MANIFEST_NAME",
     "METRICS",
@@ -40,10 +42,12 @@ __all__ = [
     "AtlasError",
     "AtlasReport",
     "AttitudeGrid",
+    "Level",
     "Requirement",
     "attitude_grid",
     "attitude_row",
     "build_atlas",
+    "map_levels",
     "metric_values",
     "parse_requirement",
     "read_atlas",

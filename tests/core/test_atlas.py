@@ -268,3 +268,24 @@ def test_the_recalls_samples_are_drawn_once_per_mesh_and_seed_and_change_no_figu
         fresh.seen, cached.seen
     )
     assert not first[0].flags.writeable
+
+
+def test_a_live_map_refines_nested_grids_running_only_the_new_attitudes():
+    from simcore.atlas import map_levels
+    from simcore.stage import Cancelled
+
+    scene = with_overrides(load_scene("paper"), pixels=8)
+    levels = list(map_levels(scene, (90.0, 45.0)))
+    assert [len(lv.rows) for lv in levels] == [6, 26] and [lv.n_run for lv in levels] == [6, 20]
+    coarse, fine = levels
+    assert all(fine.rows[a] == row for a, row in coarse.rows.items())
+    asked = []
+
+    def stop():
+        asked.append(1)
+        return len(asked) > 3
+
+    with pytest.raises(Cancelled):
+        list(map_levels(scene, (90.0, 45.0), should_stop=stop))
+    with pytest.raises(AtlasError, match="half"):
+        next(map_levels(scene, (90.0, 30.0)))

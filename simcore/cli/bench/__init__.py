@@ -2,13 +2,15 @@
 preset's time against its error (``tradeoff``), with ``--startup`` the phases of ``lmapd simulate``
 in fresh processes (``startup``), with ``--design`` a design study's wall time (``design``), with
 ``--kernel`` the compiled echo kernel against the numpy path in fresh processes (``kernel``), with
-``--sweep`` a sweep's wall time on Dask clusters of 1 and 2 workers (``sweep``).
+``--sweep`` a sweep's wall time on Dask clusters of 1 and 2 workers (``sweep``), with ``--atlas``
+the MRO's whole sphere of attitudes and the quality stage's shared samples (``atlas``).
 
     lmapd bench [--quick] [--json FILE] [--tradeoff --out DIR [--pixels N] | --startup |
                 --design [--trials N] [--workers N] |
                 --kernel [--rounds N] [--repeats N] [--before DIR] |
                 --sweep [--frames N] [--pixels N] [--workers N ...] [--backends B ...]
-                        [--repeats N]]
+                        [--repeats N] |
+                --atlas [--pixels N] [--workers N] [--repeats N]]
 
 The modules load the imaging chain; they are imported when the command runs, not at ``--help``.
 The benchmarks that need a browser or a served app stay scripts (``scripts/bench_app.py``,
@@ -57,20 +59,26 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
         action="store_true",
         help="a sweep's wall time on Dask clusters of 1 and 2 workers (the best of the rounds)",
     )
+    bench.add_argument(
+        "--atlas",
+        action="store_true",
+        help="lmapd atlas of the MRO at 10 deg (614 attitudes) at 64 and 128 px, and the "
+        "quality stage with its samples shared against drawn anew",
+    )
     bench.add_argument("--trials", type=int, help="designs to screen for --design")
     bench.add_argument(
         "--workers",
         type=int,
         nargs="+",
-        help="Dask workers: one count for --design (default 2), the counts to compare for "
-        "--sweep (default 1 2)",
+        help="Dask workers: one count for --design and --atlas (default 2), the counts to "
+        "compare for --sweep (default 1 2)",
     )
     bench.add_argument("--out", help="folder for tradeoff.json and tradeoff.png")
     bench.add_argument(
         "--pixels",
         type=int,
-        help="array size per side for --tradeoff (default 256, the paper's; 128 with --quick) "
-        "and --sweep (default 128; 32 with --quick)",
+        help="array size per side for --tradeoff (default 256, the paper's; 128 with --quick), "
+        "--sweep (default 128; 32 with --quick) and --atlas (default: 64, then 128)",
     )
     bench.add_argument(
         "--rounds", type=int, help="rounds of fresh processes for --kernel (default 3; 1 quick)"
@@ -107,6 +115,7 @@ def run_cli(args: argparse.Namespace) -> int:
         "--design": args.design,
         "--kernel": args.kernel,
         "--sweep": args.sweep,
+        "--atlas": args.atlas,
     }
     chosen = [name for name, on in modes.items() if on]
     if len(chosen) > 1:
@@ -123,6 +132,13 @@ def run_cli(args: argparse.Namespace) -> int:
         rounds = args.rounds or (1 if args.quick else 3)
         repeats = args.repeats or (3 if args.quick else 7)
         return kernel.main(rounds, repeats, args.json, args.before)
+    if args.atlas:
+        from . import atlas  # noqa: PLC0415  (the imaging chain, Dask)
+
+        workers = args.workers[0] if args.workers else 2
+        pixels = (args.pixels,) if args.pixels else ((32,) if args.quick else (64, 128))
+        repeats = args.repeats or (1 if args.quick else 5)
+        return atlas.main(pixels, workers, repeats, args.quick, args.json)
     if args.sweep:
         from . import sweep  # noqa: PLC0415  (the imaging chain, Dask)
 
@@ -155,6 +171,7 @@ OPTIONS = {
     "--design": ("trials", "workers"),
     "--kernel": ("rounds", "repeats", "before"),
     "--sweep": ("frames", "pixels", "workers", "backends", "repeats"),
+    "--atlas": ("pixels", "workers", "repeats"),
 }
 
 
@@ -170,8 +187,8 @@ def _check_options(args: argparse.Namespace, mode: str | None) -> None:
             raise CliError(f"--{option} is for --sweep")
     if mode == "--tradeoff" and not args.out:
         raise CliError("--tradeoff needs --out DIR")
-    if mode == "--design" and args.workers is not None and len(args.workers) != 1:
-        raise CliError("--design runs on one number of --workers")
+    if mode in ("--design", "--atlas") and args.workers is not None and len(args.workers) != 1:
+        raise CliError(f"{mode} runs on one number of --workers")
     floors = {"trials": 1, "rounds": 1, "repeats": 1, "frames": 1}  # pixels: the scene checks
     for option, floor in floors.items():
         value = getattr(args, option)

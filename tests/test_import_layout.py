@@ -289,6 +289,7 @@ SIMCORE_FLOORS = (
     # runs of many frames and their analyses
     (
         "simcore.sweep",
+        "simcore.atlas",
         "simcore.flyaround",
         "simcore.compare",
         "simcore.reproduce",

@@ -9,7 +9,7 @@ the map. The method and its cost: docs/atlas.md.
 
 from __future__ import annotations
 
-from .frame import COLUMNS, DEFAULT_METRIC, METRICS, attitude_row
+from .frame import COLUMNS, DEFAULT_METRIC, METRICS, attitude_row, metric_values
 from .grid import DEFAULT_STEP_DEG, STEP_RANGE_DEG, AtlasError, AttitudeGrid, attitude_grid
 from .live import LIVE_LEVELS_DEG, Level, map_levels
 from .run import (
@@ -20,7 +20,6 @@ from .run import (
     AtlasReport,
     Requirement,
     build_atlas,
-    metric_values,
     parse_requirement,
     read_atlas,
     run_atlas,

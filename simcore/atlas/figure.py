@@ -15,8 +15,9 @@ from typing import Any
 import numpy as np
 
 from .. import io
-from .frame import METRICS
-from .run import Atlas, metric_values
+from ..scene import Scene
+from .frame import METRICS, metric_values
+from .grid import AttitudeGrid
 
 _NOT_SEEN = "#c8c8c8"
 _EDGE_STEPS = 6  # [-] points along each cell edge (the projection bends the meridians)
@@ -58,9 +59,16 @@ def cell_polygons(pitch_deg: float, azimuth_deg: float, d_pitch: float, d_az: fl
 
 
 def write_map(
-    path: Path, table, atlas: Atlas, summary: dict[str, Any], insets: bool = True
+    path: Path,
+    table,
+    scene: Scene,
+    grid: AttitudeGrid,
+    metric: str,
+    summary: dict[str, Any],
+    insets: bool = True,
 ) -> None:
-    """Draw the map of ``atlas.metric`` from the atlas ``table`` into ``path`` (PNG)."""
+    """Draw the map of ``metric`` from the atlas ``table`` of ``scene`` over ``grid`` into
+    ``path`` (PNG); ``summary`` (simcore.atlas.summarize) gives the best and worst."""
     import matplotlib  # noqa: PLC0415
 
     matplotlib.use("Agg")
@@ -68,12 +76,11 @@ def write_map(
     from matplotlib.collections import PolyCollection  # noqa: PLC0415
     from matplotlib.patches import Patch  # noqa: PLC0415
 
-    column, label, better = METRICS[atlas.metric]
-    values = metric_values(table, atlas.metric)
+    column, label, better = METRICS[metric]
+    values = metric_values(table, metric)
     pitch = np.asarray(table.column("pitch_deg").to_pylist())
     azimuth = np.asarray(table.column("azimuth_deg").to_pylist())
     seen = np.asarray([n or 0 for n in table.column("n_hit_pixels").to_pylist()]) > 0
-    grid = atlas.grid
     fig = plt.figure(figsize=(10, 7.2), dpi=110)
     ax = fig.add_axes((0.05, 0.40, 0.80, 0.50), projection="mollweide")
     finite = values[np.isfinite(values)]
@@ -121,7 +128,7 @@ def write_map(
                 label=f"{which}: pitch {chosen['pitch_deg']:g}°, azimuth "
                 f"{chosen['azimuth_deg']:g}°, {chosen['value']:.3g}",
             )
-    label = label.replace("at tau", f"at tau = {100 * atlas.scene.quality.tau_m:g} cm")
+    label = label.replace("at tau", f"at tau = {100 * scene.quality.tau_m:g} cm")
     cax = fig.add_axes((0.87, 0.44, 0.018, 0.42))
     bar = fig.colorbar(matplotlib.cm.ScalarMappable(norm=norm, cmap=cmap), cax=cax)
     bar.set_label(label)
@@ -133,7 +140,7 @@ def write_map(
             Patch(facecolor="white", edgecolor="#888888", hatch="///", label="seen, no value")
         ]
     ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.08), ncol=2, fontsize=8)
-    s = atlas.scene
+    s = scene
     median = summary.get("median")
     median_text = "n/a" if median is None else f"{median:.3g}"
     fig.suptitle(
@@ -144,14 +151,14 @@ def write_map(
         fontsize=10,
     )
     if insets:
-        credit = _draw_insets(fig, atlas, summary)
+        credit = _draw_insets(fig, scene, summary)
         fig.text(0.5, 0.01, credit, ha="center", fontsize=7, color="#444444")
     with io.atomic_path(path) as tmp, np.errstate(invalid="ignore"):  # the poles' inverse
         fig.savefig(tmp, format="png")
     plt.close(fig)
 
 
-def _inset_attitudes(atlas: Atlas, summary: dict[str, Any]) -> list[tuple[str, float, float]]:
+def _inset_attitudes(summary: dict[str, Any]) -> list[tuple[str, float, float]]:
     """The attitudes drawn as silhouettes: best, worst, the front view and a side view."""
     chosen = [
         (which, summary[which]["pitch_deg"], summary[which]["azimuth_deg"])
@@ -164,7 +171,7 @@ def _inset_attitudes(atlas: Atlas, summary: dict[str, Any]) -> list[tuple[str, f
     return chosen
 
 
-def _draw_insets(fig, atlas: Atlas, summary: dict[str, Any]) -> str:
+def _draw_insets(fig, scene: Scene, summary: dict[str, Any]) -> str:
     """The target's silhouette (its pixels' hits) at a few attitudes, under the map; returns the
     target's credit line."""
     from ..pipeline import Pipeline  # noqa: PLC0415
@@ -172,10 +179,9 @@ def _draw_insets(fig, atlas: Atlas, summary: dict[str, Any]) -> str:
 
     pipeline = Pipeline()
     credit = ""
-    chosen = _inset_attitudes(atlas, summary)
+    chosen = _inset_attitudes(summary)
     for k, (name, p, a) in enumerate(chosen):
-        scene = with_overrides(atlas.scene, pitch_deg=p, azimuth_deg=a)
-        result = pipeline.run(scene)
+        result = pipeline.run(with_overrides(scene, pitch_deg=p, azimuth_deg=a))
         mask = result.hits.hit_pixel_mask.reshape(result.pixels, result.pixels)
         credit = f"target: {result.target.name}; {result.target.credit}"
         ax = fig.add_axes((0.06 + k * 0.225, 0.04, 0.17, 0.19))

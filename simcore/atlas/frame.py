@@ -67,6 +67,13 @@ COLUMNS = (
 )
 
 
+def metric_values(table, metric: str) -> np.ndarray:
+    """(n,) float64 values of ``metric`` in an atlas table (NaN where it has none, or the
+    attitude failed or is not done)."""
+    column = METRICS[metric][0]
+    return np.array([np.nan if v is None else float(v) for v in table.column(column).to_pylist()])
+
+
 def attitude_row(result: Result) -> dict[str, Any]:
     """The atlas row of one frame (COLUMNS); None where a figure has no sample."""
     s = result.summary()

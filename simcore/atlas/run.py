@@ -31,7 +31,7 @@ from ..scene import Scene, SceneError, dump_scene, with_overrides
 from ..sweep.run import _Executor
 from ..sweep.spec import CONNECT_TIMEOUT_S, FRAMES_DIR, Frame, Sweep, build_sweep
 from ..sweep.table import _read_row, _row_path
-from .frame import COLUMNS, DEFAULT_METRIC, METRICS, _attitude_task, run_attitude
+from .frame import COLUMNS, DEFAULT_METRIC, METRICS, _attitude_task, metric_values, run_attitude
 from .grid import DEFAULT_STEP_DEG, AtlasError, AttitudeGrid, attitude_grid
 
 MANIFEST_NAME = "atlas.json"
@@ -271,7 +271,7 @@ def run_atlas(
     if figure:
         from .figure import write_map  # noqa: PLC0415  (matplotlib)
 
-        write_map(out / FIGURE_NAME, table, atlas, summary)
+        write_map(out / FIGURE_NAME, table, atlas.scene, atlas.grid, atlas.metric, summary)
     return report
 
 
@@ -364,12 +364,6 @@ def read_atlas(path: str | Path):
 
     path = Path(path)
     return pq.read_table(path / TABLE_NAME if path.is_dir() else path)
-
-
-def metric_values(table, metric: str) -> np.ndarray:
-    """(n,) float64 values of ``metric`` (NaN where it has none, or the attitude failed)."""
-    column = METRICS[metric][0]
-    return np.array([np.nan if v is None else float(v) for v in table.column(column).to_pylist()])
 
 
 def _score(values: np.ndarray, better: str) -> np.ndarray:

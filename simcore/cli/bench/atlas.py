@@ -44,14 +44,16 @@ def _quality_ab(pixels: int, repeats: int) -> dict[str, list[float]]:
     ]
     for _ in range(repeats):
         for r in results:
+            caster = r.caster
+            assert caster is not None  # a pipeline's result has its target's caster
             for mode in ("shared", "anew"):
-                model = r.caster.model
+                model = caster.model
                 if mode == "anew":
                     quality._SAMPLES.clear()
                     model.surface.__dict__.pop("face_boxes", None)
                 t0 = time.perf_counter()
                 quality.quality_metrics(
-                    r.cloud, r.caster, r.hits, base.receive.fov_rad, base.quality.tau_m, base.seed
+                    r.cloud, caster, r.hits, base.receive.fov_rad, base.quality.tau_m, base.seed
                 )
                 times[mode].append(time.perf_counter() - t0)
     return times

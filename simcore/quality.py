@@ -11,6 +11,15 @@ tolerance tau (``quality.tau_m``)
   samples that count are spread by area over the surface the lidar sees, grazing parts included
   (the facets hit by the pixels' rays would miss most of a sphere's rim);
 - F-score: their harmonic mean;
+- the recall's sampling error ``recall_sd`` (a binomial proportion of the seen samples);
+- ``recall_projected``: the recall with each seen sample weighted by |cos| of its incidence, the
+  share of the seen surface's *projected* area (what the pixels can sample) within tau of a point:
+  a face seen edge-on weighs nothing, so the figure does not jump when one turns into view at a
+  grazing angle (the plain recall counts its whole area at once), and ``seen_projected_area_m2``;
+- ``recall_cap`` and ``recall_projected_cap``: the same figures for an ideal lidar with the same
+  pixels, one exact point per pixel that sees the target (its centre ray's first hit): the most
+  any lidar with this pixel footprint can reach, so that a requirement above it is known to be
+  unreachable whatever the energy;
 
 and along the lines of sight, from each point's ground truth (``simcore.pointcloud.ground_truth``):
 the median signed range error (bias), its RMS, the 95th percentile of its magnitude, the share of
@@ -23,6 +32,7 @@ app asks for it. The model: docs/physics.md#imaging-quality.
 
 from __future__ import annotations
 
+import math
 import threading
 import weakref
 from dataclasses import dataclass
@@ -35,7 +45,7 @@ from .geometry import RayCaster
 from .stage import Stage
 
 if TYPE_CHECKING:
-    from .geometry import Hits, PoseInSensor, TargetStage
+    from .geometry import Hits, PoseInSensor, RayGrid, TargetStage
     from .pointcloud import PointCloud
     from .scene import Scene
     from .target import TargetModel
@@ -53,17 +63,28 @@ class SurfaceSamples:
     face : (n,) int64 facet of each sample
     seen : (n,) bool inside the field of view and not hidden from the lidar
     area_m2 : total area of the sampled facets [m^2]
+    cos_incidence : (n,) float64 or None |cos| of the angle between each sample's facet normal
+        and its line of sight (1 face-on, 0 edge-on); None where not computed
     """
 
     points_t: np.ndarray
     face: np.ndarray
     seen: np.ndarray
     area_m2: float
+    cos_incidence: np.ndarray | None = None
 
     @property
     def seen_area_m2(self) -> float:
         """The seen share of the sampled area [m^2]."""
         return self.area_m2 * float(np.mean(self.seen)) if len(self.seen) else 0.0
+
+    @property
+    def seen_projected_area_m2(self) -> float:
+        """The seen area projected across the lines of sight, each sample weighted by its
+        |cos incidence| [m^2]: a convex target's silhouette area (a sphere's pi R^2)."""
+        if self.cos_incidence is None or not len(self.seen):
+            return 0.0
+        return self.area_m2 * float(np.sum(self.cos_incidence[self.seen])) / len(self.seen)
 
 
 def facet_areas_m2(vertices_m, faces) -> np.ndarray:
@@ -163,7 +184,37 @@ def seen_samples(
     if len(look):
         hit_m, _ = caster.first_hits(origin_t, dirs_t[look], start)
         seen[look] = hit_m >= dist_m[look] - SEEN_SLACK_M
-    return SurfaceSamples(points_t=points_t, face=face, seen=seen, area_m2=area)
+    normals = np.asarray(model.face_normals)[face]
+    cos_incidence = np.abs(np.einsum("ij,ij->i", normals, dirs_t))
+    return SurfaceSamples(
+        points_t=points_t, face=face, seen=seen, area_m2=area, cos_incidence=cos_incidence
+    )
+
+
+def ideal_points_t(caster: RayCaster, pose: PoseInSensor, pixel_directions) -> np.ndarray:
+    """(m, 3) the cloud of an ideal lidar with the array's pixels, target frame [m]: one exact
+    point per pixel that sees the target, where its centre ray (``pixel_directions`` (n, 3),
+    sensor frame) first hits it; no noise, no missed pixel, every pixel lit."""
+    origin_t = -pose.rotation.T @ pose.translation_m
+    start = max(0.0, float(np.linalg.norm(pose.translation_m)) - 1.05 * caster.model.radius_m)
+    hits = caster.cast(origin_t, np.asarray(pixel_directions), start, rotation=pose.rotation)
+    hit = np.isfinite(hits.range_m)
+    return origin_t + hits.range_m[hit, None] * hits.directions_t[hit]
+
+
+def recall_figures(
+    points_t, surface: SurfaceSamples, tau_m: float
+) -> tuple[np.ndarray, float, float]:
+    """Which seen samples lie within ``tau_m`` of a point of ``points_t`` (m, 3) [m], and the
+    recall by area and by projected area: (n,) bool recalled, recall, projected recall."""
+    recalled = np.zeros(len(surface.face), dtype=bool)
+    if len(points_t) and surface.seen.any():
+        d_m, _ = cKDTree(points_t).query(surface.points_t[surface.seen], k=1)
+        recalled[surface.seen] = d_m <= tau_m
+    recall = _ratio(recalled.sum(), surface.seen.sum())
+    w = surface.cos_incidence if surface.cos_incidence is not None else surface.seen * 1.0
+    projected = _ratio(float(np.sum(w[recalled])), float(np.sum(w[surface.seen])))
+    return recalled, recall, projected
 
 
 def point_to_mesh_m(points_t, vertices_m, faces) -> np.ndarray:
@@ -230,12 +281,15 @@ def quality_metrics(
     tau_m: float,
     seed: int,
     n_samples: int = SURFACE_SAMPLES,
+    pixel_directions=None,
 ) -> dict[str, Any]:
     """The ``quality.*`` figures of one frame (see the module's docstring), plain JSON values.
 
     cloud : the frame's points (sensor frame) with their ground truth
     caster : the target's ray caster (its model is the true mesh)
     hits : the frame's first hits (the seen facets and the pose)
+    pixel_directions : (n_pixels, 3) the pixels' centre directions, sensor frame (the rays
+        stage's): with them, the recall caps of an ideal lidar with these pixels
     """
     model = caster.model
     attrs = cloud.attributes
@@ -244,15 +298,12 @@ def quality_metrics(
     near = near_mesh(points_t, model, tau_m, hits.visible_faces)
     points_s, face_s, area_m2 = mesh_samples(model, seed, n_samples)
     surface = seen_samples(caster, hits.pose, fov_rad, points_s, face_s, area_m2)
-    recalled = np.zeros(len(surface.face), dtype=bool)
-    if len(points_t) and surface.seen.any():
-        d_m, _ = cKDTree(points_t).query(surface.points_t[surface.seen], k=1)
-        recalled[surface.seen] = d_m <= tau_m
+    recalled, recall, recall_projected = recall_figures(points_t, surface, tau_m)
     precision = _ratio(near.sum(), len(near))
-    recall = _ratio(recalled.sum(), surface.seen.sum())
     f_score = 2 * precision * recall / (precision + recall) if precision + recall > 0 else 0.0
     error_m = np.asarray(attrs["range_error_m"])[target]
     seen_m2 = surface.seen_area_m2
+    n_seen = int(surface.seen.sum())
     figures: dict[str, Any] = {
         "tau_m": float(tau_m),
         "precision": precision,
@@ -262,8 +313,17 @@ def quality_metrics(
         "outlier_fraction": _ratio(float(np.count_nonzero(attrs["outlier"])), len(cloud)),
         "point_density_per_m2": _ratio(len(points_t), seen_m2),
         "seen_area_m2": seen_m2,
-        "n_surface_samples": int(surface.seen.sum()),
+        "n_surface_samples": n_seen,
+        # the recall's sampling error: a binomial proportion of the seen samples
+        "recall_sd": math.sqrt(recall * (1.0 - recall) / n_seen) if n_seen else 0.0,
+        "recall_projected": recall_projected,
+        "seen_projected_area_m2": surface.seen_projected_area_m2,
     }
+    if pixel_directions is not None:
+        ideal = ideal_points_t(caster, hits.pose, pixel_directions)
+        _, cap, cap_projected = recall_figures(ideal, surface, tau_m)
+        figures["recall_cap"] = cap
+        figures["recall_projected_cap"] = cap_projected
     figures["parts"] = _per_part(model, attrs, target, near, surface, recalled, error_m)
     return figures
 
@@ -291,16 +351,24 @@ def _per_part(model, attrs, target, near, surface, recalled, error_m) -> list[di
     return rows
 
 
-def stage_quality(scene: Scene, tgt: TargetStage, hits: Hits, cloud: PointCloud) -> dict:
+def stage_quality(
+    scene: Scene, tgt: TargetStage, rays: RayGrid, hits: Hits, cloud: PointCloud
+) -> dict:
     """The quality stage: :func:`quality_metrics` of the frame at ``quality.tau_m``."""
     return quality_metrics(
-        cloud, tgt.caster, hits, scene.receive.fov_rad, scene.quality.tau_m, scene.seed
+        cloud,
+        tgt.caster,
+        hits,
+        scene.receive.fov_rad,
+        scene.quality.tau_m,
+        scene.seed,
+        pixel_directions=rays.pixel_directions,
     )
 
 
 QUALITY = Stage(
     name="quality",
-    upstream=("target", "hits", "cloud"),
+    upstream=("target", "rays", "hits", "cloud"),
     reads=lambda s: (s.quality.tau_m, s.seed, s.receive.fov_rad),
     compute=stage_quality,
 )

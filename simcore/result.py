@@ -91,6 +91,7 @@ class Result:
                 self.scene.receive.fov_rad,
                 self.scene.quality.tau_m,
                 self.scene.seed,
+                pixel_directions=self.rays.pixel_directions,
             )
             self.timings_s["quality"] = time.perf_counter() - t0
         return self.extras["quality"]

@@ -19,6 +19,8 @@ METRICS: dict[str, tuple[str, str, str]] = {
     "f_score": ("quality.f_score", "F-score at tau [-]", "high"),
     "precision": ("quality.precision", "precision at tau [-]", "high"),
     "recall": ("quality.recall", "recall at tau [-]", "high"),
+    "recall_projected": ("quality.recall_projected", "projected-area recall at tau [-]", "high"),
+    "recall_cap": ("quality.recall_cap", "recall cap of an ideal lidar at tau [-]", "high"),
     "range_bias_m": ("quality.range_bias_m", "median range error [m]", "small"),
     "range_rmse_m": ("quality.range_rmse_m", "RMS range error [m]", "low"),
     "n_points": ("n_points", "points of the cloud [-]", "high"),
@@ -52,6 +54,8 @@ COLUMNS = (
         "share of the seen surface within tau of a point; none if none seen",
     ),
     ("quality.f_score", "float64", "harmonic mean of precision and recall (0 if seen, no point)"),
+    ("quality.recall_projected", "float64", "recall weighted by projected area (|cos incidence|)"),
+    ("quality.recall_cap", "float64", "recall of an ideal lidar with these pixels (its ceiling)"),
     ("quality.range_bias_m", "float64", "median signed range error of the target points [m]"),
     ("quality.range_rmse_m", "float64", "RMS range error of the target points [m]"),
     ("quality.range_error_p95_m", "float64", "95th percentile of |range error| [m]"),
@@ -84,6 +88,8 @@ def attitude_row(result: Result) -> dict[str, Any]:
     row["quality.precision"] = q["precision"] if has_points else None
     row["quality.recall"] = q["recall"] if seen else None
     row["quality.f_score"] = q["f_score"] if seen else None
+    row["quality.recall_projected"] = q["recall_projected"] if seen else None
+    row["quality.recall_cap"] = q.get("recall_cap") if seen else None
     for name in ("range_bias_m", "range_rmse_m", "range_error_p95_m"):
         row[f"quality.{name}"] = q[name]
     row["quality.point_density_per_m2"] = q["point_density_per_m2"] if seen else None

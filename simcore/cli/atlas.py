@@ -26,6 +26,8 @@ METRIC_NAMES = (
     "f_score",
     "precision",
     "recall",
+    "recall_projected",
+    "recall_cap",
     "range_bias_m",
     "range_rmse_m",
     "n_points",

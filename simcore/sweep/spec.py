@@ -58,6 +58,8 @@ METRICS = (
     ("quality.precision", "float64", "share of target points within tau of the true mesh"),
     ("quality.recall", "float64", "share of the seen surface within tau of a point"),
     ("quality.f_score", "float64", "harmonic mean of precision and recall"),
+    ("quality.recall_projected", "float64", "recall weighted by projected area (|cos incidence|)"),
+    ("quality.recall_cap", "float64", "recall of an ideal lidar with these pixels (its ceiling)"),
     ("quality.range_bias_m", "float64", "median signed range error of the target points [m]"),
     ("quality.range_rmse_m", "float64", "RMS range error of the target points [m]"),
     ("quality.range_error_p95_m", "float64", "95th percentile of |range error| [m]"),

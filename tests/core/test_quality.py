@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from scipy import integrate
 from scipy.spatial import cKDTree
 
 import simcore
@@ -269,3 +270,80 @@ def test_the_geiger_mode_first_photon_cloud_carries_the_ground_truth():
         attrs["range_error_m"][echo], attrs["range_m"][echo] - attrs["true_range_m"][echo]
     )
     assert np.isnan(attrs["true_range_m"][~echo]).all() and attrs["outlier"][~echo].all()
+
+
+def _calibration_scene(mesh: str, size_m: float, pixels: int, **extra) -> Scene:
+    return with_overrides(
+        Scene(),
+        {
+            "target.mesh": mesh,
+            "target.size_m": size_m,
+            "pose.distance_m": 20.0,
+            "detector.pixels": pixels,
+            "receive.fov_rad": 0.12,
+            "transmit.illumination": "flat_top",
+            "laser.divergence_rad": 0.12,
+            "transmit.beam_expansion_ratio": 1.0,
+            **extra,
+        },
+    )
+
+
+def test_the_projected_recall_is_smooth_where_a_face_turns_into_view_and_the_plain_recall_jumps():
+    # the lidar level with a cube's top face: a fiftieth of a degree of pitch either way hides it
+    # or shows it edge-on, its whole square metre with no pixel on it
+    scene = _calibration_scene("cube", 1.0, 32, **{"pose.offset_y_m": 0.5})
+    pipe = simcore.Pipeline()
+    below, above = (pipe.run(with_overrides(scene, pitch_deg=p)).quality for p in (-0.02, 0.02))
+    assert above["seen_area_m2"] == pytest.approx(2 * below["seen_area_m2"], rel=0.02)
+    assert above["recall"] < 0.6 * below["recall"]  # the new face's area counts, unsampled
+    # weighted by |cos incidence| the new face weighs nothing: the front face's samples decide,
+    # about a sixth of the cube's (binomial sd of each, 4 sd of their difference)
+    n_front = quality.SURFACE_SAMPLES / 6
+    r = below["recall_projected"]
+    assert abs(above["recall_projected"] - r) <= 4 * math.sqrt(2 * r * (1 - r) / n_front)
+    assert above["seen_projected_area_m2"] == pytest.approx(
+        below["seen_projected_area_m2"], rel=0.01
+    )
+    # the ideal lidar with these pixels is as far from the plain recall's 1: the cap says so
+    assert above["recall_cap"] < 0.6 and above["recall_projected_cap"] > 0.99
+    assert above["recall_sd"] == pytest.approx(
+        math.sqrt(above["recall"] * (1 - above["recall"]) / above["n_surface_samples"])
+    )
+
+
+def test_a_spheres_projected_seen_area_is_the_integral_of_cos_incidence_over_its_cap():
+    radius_m, distance_m = 1.0, 20.0
+    scene = _calibration_scene("sphere", 2 * radius_m, 32)
+    q = simcore.simulate(scene).quality
+
+    def cos_incidence_area(psi):  # the lidar at D from the centre, a point at angle psi from it
+        r = math.sqrt(distance_m**2 + radius_m**2 - 2 * distance_m * radius_m * math.cos(psi))
+        cos_theta = (distance_m * math.cos(psi) - radius_m) / r
+        return cos_theta * 2 * math.pi * radius_m**2 * math.sin(psi)
+
+    expected_m2, _ = integrate.quad(cos_incidence_area, 0.0, math.acos(radius_m / distance_m))
+    area_m2 = 4 * math.pi * radius_m**2  # the polyhedron's is within 0.1 % of it
+    # the estimate: area x mean of w 1_seen over the samples; var <= E[w 1_seen] (w <= 1)
+    sd_m2 = area_m2 * math.sqrt(expected_m2 / area_m2 / quality.SURFACE_SAMPLES)
+    assert abs(q["seen_projected_area_m2"] - expected_m2) <= 4 * sd_m2 + 1e-3 * expected_m2
+
+
+def test_an_ideal_lidars_recall_of_a_face_on_plate_is_its_pixel_lattices_cover():
+    pixels, tau_m = 40, 0.02  # a footprint of 6 cm, more than 2 tau: the discs do not overlap
+    scene = _calibration_scene("plate", 1.0, pixels, **{"quality.tau_m": tau_m})
+    result = simcore.simulate(scene)
+    q = result.quality
+    # the lattice: each pixel's centre ray on the plate's plane, z = D (face-on), inside it
+    d = result.rays.pixel_directions
+    lattice = d[:, :2] * (20.0 / d[:, 2])[:, None]
+    lattice = lattice[np.all(np.abs(lattice) <= 0.5, axis=1)]
+    g = (np.arange(600) + 0.5) / 600 - 0.5  # the plate on a fine grid: the share within tau
+    grid = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)
+    near, _ = cKDTree(lattice).query(grid, k=1)
+    covered = float(np.mean(near <= tau_m))
+    assert covered == pytest.approx(math.pi * tau_m**2 / 0.06**2, rel=0.15)  # a lattice's discs
+    n = q["n_surface_samples"]
+    sd = math.sqrt(covered * (1 - covered) / n)
+    assert abs(q["recall_cap"] - covered) <= 4 * sd + 2 / 600
+    assert q["recall_projected_cap"] == pytest.approx(q["recall_cap"], abs=4 * sd)

@@ -27,7 +27,14 @@ def test_an_atlas_writes_its_table_summary_map_and_scene_files(tmp_path, capsys)
     printed = capsys.readouterr().out
     assert "6 attitudes" in printed and "best: pitch" in printed and "% of the sphere" in printed
     names = {p.name for p in out.iterdir()}
-    assert {"atlas.parquet", "atlas.json", "atlas.png", "best.toml", "worst.toml", "frames"} <= names
+    assert {
+        "atlas.parquet",
+        "atlas.json",
+        "atlas.png",
+        "best.toml",
+        "worst.toml",
+        "frames",
+    } <= names
     summary = json.loads((out / "atlas.json").read_text())
     assert summary["complete"] is True and summary["grid"]["n_attitudes"] == 6
     assert summary["meets_requirements"]["share_of_grid_points"] == 1.0

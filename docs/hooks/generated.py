@@ -9,7 +9,10 @@ A page asks for one with a marker on a line of its own:
     each ``lmapd`` command's ``--help``, from its argparse parser;
 ``<!-- generated: bench -->``
     the stage timings of the ``lmapd bench --json`` run committed as ``docs/data/bench.json``,
-    with the machine and the date it ran on.
+    with the machine and the date it ran on;
+``<!-- generated: atlas-bench -->``
+    the atlas's costs from the ``lmapd bench --atlas --json`` run committed as
+    ``docs/data/atlas_bench.json``.
 
 The same functions serve the tests (``tests/test_docs.py``), which check that every key and every
 command appears. Not part of the site (``exclude_docs`` in mkdocs.yml).
@@ -27,6 +30,7 @@ from simcore.scene import key_reference
 
 DOCS = Path(__file__).resolve().parent.parent
 BENCH_JSON = DOCS / "data" / "bench.json"
+ATLAS_BENCH_JSON = DOCS / "data" / "atlas_bench.json"
 MARKER = re.compile(r"^<!-- generated: ([a-z-]+) -->$", re.MULTILINE)
 FRAME_STAGES = ("hits", "echo", "background", "receiver", "detection", "cloud")
 
@@ -105,7 +109,48 @@ def bench_markdown(path: Path = BENCH_JSON) -> str:
     return "\n".join(head + rows)
 
 
-GENERATORS = {"scene-keys": scene_keys_markdown, "cli": cli_markdown, "bench": bench_markdown}
+def _spread_ms(values) -> str:
+    v = sorted(values)
+    return f"{v[len(v) // 2] * 1e3:.0f} ms ({v[0] * 1e3:.0f}-{v[-1] * 1e3:.0f})"
+
+
+def atlas_bench_markdown(path: Path = ATLAS_BENCH_JSON) -> str:
+    """The committed ``lmapd bench --atlas --json`` run: the quality stage A/B and each atlas."""
+    fig = json.loads(path.read_text(encoding="utf-8"))
+    machine = fig.get("machine", {})
+    q = fig["quality_s"]
+    lines = [
+        f"Run on {fig.get('date_utc', 'an unrecorded date')} (UTC), {machine.get('cpu', '?')}, "
+        f"{machine.get('cpus', '?')} CPUs, 1-minute load average {fig['load_average']:.2f} "
+        "before the run; medians with their ranges.",
+        "",
+        f"The quality stage of one frame at {fig['quality_pixels']} x {fig['quality_pixels']} px "
+        f"(12 attitudes x {len(q['shared']) // 12}, interleaved): {_spread_ms(q['shared'])} with "
+        f"the samples and boxes shared, {_spread_ms(q['anew'])} drawing them anew for each frame "
+        "(as every frame did before).",
+        "",
+        "| pixels | attitudes | workers | wall time (s) | a frame with its quality figures |",
+        "|---|---|---|---|---|",
+    ]
+    for a in fig["atlas"]:
+        lines.append(
+            f"| {a['pixels']} x {a['pixels']} | {a['n_attitudes']} | {fig['workers']} | "
+            f"{a['wall_s']:.1f} | {_spread_ms(a['frame_s'])} |"
+        )
+    lines += [
+        "",
+        "The wall time runs from the call to the files written: the cluster's start (about 3 s), "
+        "each worker's first frame (the MRO's mesh and BVH), the map and its silhouettes.",
+    ]
+    return "\n".join(lines)
+
+
+GENERATORS = {
+    "scene-keys": scene_keys_markdown,
+    "cli": cli_markdown,
+    "bench": bench_markdown,
+    "atlas-bench": atlas_bench_markdown,
+}
 
 
 def on_page_markdown(markdown: str, page, config, files) -> str:

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 import os
+import platform
 import sys
 import tempfile
 import time
@@ -59,6 +60,17 @@ def _quality_ab(pixels: int, repeats: int) -> dict[str, list[float]]:
     return times
 
 
+def _cpu_name() -> str:
+    """The CPU's model name (/proc/cpuinfo), or the platform's processor string."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text(encoding="utf-8").splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "an unknown CPU"
+
+
 def _spread(values) -> str:
     v = np.asarray(values)
     return f"{np.median(v) * 1e3:.1f} ms ({v.min() * 1e3:.1f}-{v.max() * 1e3:.1f})"
@@ -66,7 +78,14 @@ def _spread(values) -> str:
 
 def main(pixels: tuple[int, ...], workers: int, repeats: int, quick: bool, json_path) -> int:
     step = 30.0 if quick else 10.0
-    figures: dict = {"load_average": os.getloadavg()[0], "step_deg": step, "workers": workers}
+    figures: dict = {
+        "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime()),
+        "machine": {"cpu": _cpu_name(), "cpus": os.cpu_count(), "platform": platform.platform()},
+        "load_average": os.getloadavg()[0],
+        "step_deg": step,
+        "workers": workers,
+        "quality_pixels": pixels[0],
+    }
     print(f"lmapd bench --atlas: load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
     times = _quality_ab(pixels[0], repeats)
     print(

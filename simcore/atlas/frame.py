@@ -11,6 +11,7 @@ import numpy as np
 from ..pipeline import Pipeline, Result
 from ..scene import Scene
 from ..sweep.frames import FrameOutcome, _error_text, _worker_pipeline
+from ..sweep.spec import METRICS as SWEEP_METRICS
 
 # The figures a map can show: name -> (column, label with its unit, which way is better:
 # "high", "low" or "small": the smaller magnitude). The columns hold None where the figure
@@ -37,12 +38,8 @@ DEFAULT_METRIC = "f_score"
 
 # the row's figures: name, Arrow type, meaning (units in the names)
 COLUMNS = (
-    ("n_pixels", "int64", "pixels of the array"),
-    ("n_hit_pixels", "int64", "pixels whose line of sight hits the target"),
-    ("n_lit_pixels", "int64", "pixels that receive an echo"),
-    ("n_points", "int64", "points of the cloud (target points and outliers)"),
-    ("n_target_points", "int64", "detected target points"),
-    ("n_outliers", "int64", "false alarms (outliers) drawn"),
+    # n_pixels, n_hit_pixels, n_lit_pixels, n_points, n_target_points, n_outliers: a sweep's
+    *SWEEP_METRICS[:6],
     (
         "quality.precision",
         "float64",

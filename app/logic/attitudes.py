@@ -34,7 +34,7 @@ from simcore.stage import Cancelled
 
 LIGHT_PIXELS = 32  # [px] the light preset's largest array side
 LIGHT_PRESET = "interactive"  # its fidelity preset
-LEVELS_DEG = (45.0, 22.5, 11.25)  # [deg] 26, then 114, then 482 attitudes
+LEVELS_DEG = (90.0, 45.0, 22.5, 11.25)  # [deg] 6, then 26, 114 and 482 attitudes
 MAX_FRAME_S = 1.0  # [s] one attitude's frame at the light preset, at most (482 of them)
 DEFAULT_METRIC = "n_target_points"
 
@@ -230,12 +230,14 @@ class AttitudeMap:
                 check_budget(self._pipeline, frame)
                 return stale()
 
-            t0 = time.perf_counter()
+            t0, cpu0 = time.perf_counter(), time.process_time()
             try:
                 self._pipeline.run(frame, should_stop=should_stop)
             except Cancelled:
                 raise StaleRequest from None
-            took_s = time.perf_counter() - t0
+            # its cost: the wall time, or the process's CPU time where other processes slowed
+            # it (a busy machine must not refuse a light scene)
+            took_s = min(time.perf_counter() - t0, time.process_time() - cpu0)
             if took_s <= self.max_frame_s:
                 return
         raise FrameRefused(

@@ -163,6 +163,11 @@ class AttitudeMap:
             )
         self._generation = self.runner.submit(MapRequest(key, self.epoch))
 
+    def compute_for_lesson(self) -> None:
+        """A lesson's map: the current scene's, in target points (what its card describes)."""
+        self.state.attitudes_metric = DEFAULT_METRIC
+        self.compute()
+
     def stop(self, *_: Any, **__: Any) -> None:
         """Stop the map under way; the levels done stay on the page."""
         if not self.state.attitudes_busy:
@@ -173,14 +178,13 @@ class AttitudeMap:
             self.state.attitudes_status = self._status(done=False, stopped=True)
 
     def on_cell_click(self, *args: Any, **__: Any) -> None:
-        """A click on a cell (its (pitch_deg, azimuth_deg)): the pose sliders go there (their
-        change handlers compute the frame). Anything else is ignored."""
+        """A click on a cell (its (pitch_deg, azimuth_deg): -90 to 90, -180 to 360): the pose
+        sliders go there (their change handlers compute the frame). Anything else is ignored."""
         cell = args[0] if len(args) == 1 and isinstance(args[0], list | tuple) else args
-        try:
-            pitch, azimuth = (float(x) for x in cell)
-        except (TypeError, ValueError):
+        if len(cell) != 2 or not all(_is_number(x) for x in cell):
             return
-        if not (math.isfinite(pitch) and math.isfinite(azimuth)) or abs(pitch) > 90.0:
+        pitch, azimuth = (float(x) for x in cell)
+        if abs(pitch) > 90.0 or not -180.0 <= azimuth <= 360.0:
             return
         azimuth = azimuth - 360.0 if azimuth > 180.0 else azimuth
         with self.state:
@@ -325,3 +329,13 @@ class AttitudeMap:
             return text + "; stopped."
         finer = [s for s in self.levels_deg if s < grid.step_deg]
         return text + (f"; refining to {finer[0]:g}°…" if finer else ".")
+
+
+def _is_number(value: Any) -> bool:
+    """A finite int or float (not a bool, not a string)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:  # an int too large for a float
+        return False

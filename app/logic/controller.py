@@ -324,7 +324,7 @@ class AppLogic:
         if self.runner.generation == generation:  # the same scene: the selection's waveforms
             self.on_controls_change()
         if plan.lesson.attitudes:  # the lesson's scene's map
-            self.attitudes.compute()
+            self.attitudes.compute_for_lesson()
 
     # -- downloads (the page's utils.download saves what these return) --------------------------
     def export_cloud(self, fmt: Any = "ply", *_: Any, **__: Any) -> Any:

@@ -37,6 +37,7 @@ LIGHT_PRESET = "interactive"  # its fidelity preset
 LEVELS_DEG = (90.0, 45.0, 22.5, 11.25)  # [deg] 6, then 26, 114 and 482 attitudes
 MAX_FRAME_S = 1.0  # [s] one attitude's frame at the light preset, at most (482 of them)
 DEFAULT_METRIC = "n_target_points"
+STATE_KEYS = ("attitudes_metric",)  # what a page may set (and ``attitudes_message``, cleared)
 
 
 def light_scene(scene: simcore.Scene) -> simcore.Scene:

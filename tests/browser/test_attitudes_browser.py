@@ -75,6 +75,12 @@ def test_the_coarse_map_appears_and_a_click_on_a_cell_moves_the_pose_sliders_the
     marker = page.evaluate(JS_STATE, "attitudes_map")["data"][1]
     assert marker["name"] == "current attitude" and marker["x"] == [-90]
     page.screenshot(path=artifacts_dir / "app-attitudes.png")
+    page.locator(".attitudes-metric").click()  # the chooser: another metric, its unit named
+    page.get_by_role("option", name="Recall").click()
+    page.wait_for_function(
+        "() => window.trame.state.get('attitudes_map').data[0].colorbar.title.text "
+        "=== 'recall at tau [-]'"
+    )
     if page.evaluate(JS_STATE, "attitudes_busy"):
         page.locator(".attitudes-stop").click()  # the finer levels are not needed here
         page.wait_for_function("() => window.trame.state.get('attitudes_busy') === false")

@@ -192,7 +192,9 @@ class AttitudeMap:
             self.state.update({"pitch_deg": pitch, "azimuth_deg": azimuth})
 
     def on_metric_change(self, **_: Any) -> None:
-        if self.state.attitudes_metric not in MAP_METRICS:
+        """The chooser: the map drawn in another metric (one of MAP_METRICS; else the default)."""
+        metric = self.state.attitudes_metric
+        if not isinstance(metric, str) or metric not in MAP_METRICS:
             self.state.attitudes_metric = DEFAULT_METRIC
             return
         self._draw()

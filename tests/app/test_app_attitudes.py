@@ -98,8 +98,9 @@ def test_the_metric_chooser_redraws_the_map_and_refuses_what_it_does_not_offer(a
             key = (pitch, 0.0) if abs(pitch) == 90 else (pitch, azimuth % 360.0)
             assert z == pytest.approx(rows[key][column], rel=1e-5)  # 6 digits drawn
     assert "F-score" in METRICS["f_score"][1] and "[m^2]" in METRICS["seen_area_m2"][1]
-    change(app, wait_busy=False, attitudes_metric="range_bias_m")
-    assert app.state.attitudes_metric == "n_target_points"
+    for other in ("range_bias_m", ["f_score"], None, 3):
+        change(app, wait_busy=False, attitudes_metric=other)
+        assert app.state.attitudes_metric == "n_target_points"
 
 
 def test_a_click_on_a_cell_moves_the_sliders_there_and_the_frame_follows_the_map_stays(app):

@@ -190,9 +190,3 @@ def _hover(
     if row.get("dominant_part"):
         text += f"; most from {row['dominant_part']} ({row['dominant_material']})"
     return text
-
-
-def solid_angles_sr(grid: AttitudeGrid) -> np.ndarray:
-    """(n_rows,) the solid angle of one cell of each row of the grid [sr] (as drawn: its area
-    on the map, times pi / 2 per unit of map area)."""
-    return np.array([grid.solid_angle_sr(float(p)) for p in grid.pitch_deg])

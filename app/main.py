@@ -19,7 +19,7 @@ from trame.app import get_server
 
 import simcore
 from app.engine import FRAME_BUDGET_BYTES, Engine
-from app.logic import flyaround, parts, studies
+from app.logic import attitudes, flyaround, parts, studies
 from app.logic.controller import AppLogic
 from app.server import connections, security
 from app.server.addresses import public_lines, start_message, trame_arguments
@@ -114,6 +114,7 @@ def client_keys() -> dict[str, security.Screen]:
     keys.update({key: security.scalar for key in flyaround.STATE_KEYS})
     keys.update({key: security.scalar for key in parts.STATE_KEYS})
     keys.update({key: security.scalar for key in studies.STATE_KEYS})
+    keys.update({key: security.scalar for key in attitudes.STATE_KEYS})
     keys.update(
         {
             "fly_playing": security.scalar,
@@ -124,6 +125,7 @@ def client_keys() -> dict[str, security.Screen]:
             "upload_error": security.cleared,
             "error_message": security.cleared,
             "input_message": security.cleared,
+            "attitudes_message": security.cleared,
         }
     )
     return keys

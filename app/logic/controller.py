@@ -23,6 +23,7 @@ import numpy as np
 import simcore
 from app.engine import Engine, Frame, FrameRefused, Preview, Request
 from app.logic import exports
+from app.logic.attitudes import AttitudeMap
 from app.logic.compare import FrameCompare
 from app.logic.controls import ControlPanel
 from app.logic.flyaround import FlyaroundLogic
@@ -110,6 +111,7 @@ class AppLogic:
             builtin_initial=initial_controls,
             use_target=self.use_target,
         )
+        self.attitudes = AttitudeMap(server, lambda: self.engine, self._on_ui_thread)  # the map
         self.lessons = LessonGuide(self.state)  # one-click scenes with a card (their own state)
         self.compare = FrameCompare(self.state)  # a pinned frame beside the new one
         self.studies = DesignStudies(self.state, studies_dir, self.open_scene)  # Design page
@@ -225,6 +227,7 @@ class AppLogic:
             preview_first=self.previews and not self.state.fly_playing,
         )
         self.state.busy = True
+        self.attitudes.scene_changed(scene)  # a map of another scene stops
         generation = self.runner.submit(request)
         self._controls_of[generation] = self.panel.current
         return generation
@@ -320,6 +323,8 @@ class AppLogic:
             )
         if self.runner.generation == generation:  # the same scene: the selection's waveforms
             self.on_controls_change()
+        if plan.lesson.attitudes:  # the lesson's scene's map
+            self.attitudes.compute_for_lesson()
 
     # -- downloads (the page's utils.download saves what these return) --------------------------
     def export_cloud(self, fmt: Any = "ply", *_: Any, **__: Any) -> Any:

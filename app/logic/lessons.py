@@ -45,6 +45,7 @@ VIEWS: dict[str, tuple[str, str]] = {
     "cloud": ("the point cloud", ".cloud-card"),
     "scene": ("the 3D scene", ".scene-card"),
     "stats": ("the statistics", ".stats-card"),
+    "attitudes": ("the attitude map", ".attitudes-card"),
 }
 
 # The paper scene's controls as link settings (its pose, array, pulse, threshold, seed, fidelity,
@@ -83,6 +84,7 @@ class Lesson:
     color_by, image_kind : the display choices (``app.state.COLOR_BY``, ``IMAGE_KINDS``)
     mode, fly_t_s, fly_j2 : single frame, or the fly-around frame at ``fly_t_s`` [s]
     view : the view its card is about (a key of ``VIEWS``): the page brings it into sight
+    attitudes : whether opening it computes the attitude map (app.logic.attitudes)
     """
 
     key: str
@@ -101,6 +103,7 @@ class Lesson:
     fly_t_s: float = 0.0
     fly_j2: bool = False
     view: str = "waveform"
+    attitudes: bool = False
 
     @property
     def link_settings(self) -> dict[str, Any]:

@@ -7,7 +7,7 @@ from trame.ui.vuetify3 import VAppLayout
 from trame.widgets import client, html
 from trame.widgets import vuetify3 as v3
 
-from app.ui import charts, controls, design, glossary, lessons, panels, static, views3d
+from app.ui import attitudes, charts, controls, design, glossary, lessons, panels, static, views3d
 from app.ui.widgets import html_attributes
 
 # After the page applied a frame, the frame-pacing helper (app/static/frame.js) waits until it is
@@ -112,6 +112,9 @@ def views_grid() -> None:
                 panels.waveform_card()
             with v3.VCol(cols=12, xl=4):
                 panels.stats_card()
+        with v3.VRow(dense=True, v_if=controls.CONTROLS_READY):
+            with v3.VCol(cols=12, lg=8, xl=6):
+                attitudes.attitudes_card()
         footer()
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import re
+import time
 
 import numpy as np
 import pytest
@@ -29,6 +30,7 @@ from app.main import LmapdApp
 from app.payloads.encode import si_text
 from app.state import COLOR_BY, IMAGE_KINDS, MAX_SELECTED_PIXELS, controls_from_scene
 from simcore import materials, reproduce
+from simcore.atlas import attitude_grid
 from simcore.constants import C
 
 PANELS = ("solar_L", "solar_R")
@@ -430,6 +432,46 @@ def figures_lm_vs_gm(app, pipeline, result) -> dict:
     }
 
 
+def figures_panels_vanish(app, pipeline, result) -> dict:
+    """From the map the lesson computes (its 45-degree grid: the rows of a finer level hold
+    them too), then stopped: the finer levels are not the card's."""
+    lesson = BY_KEY["panels-vanish"]
+    maps = app.logic.attitudes
+    assert app.state.attitudes_metric == "n_target_points"
+    deadline = time.monotonic() + 120
+    while (maps.level is None or maps.level.grid.step_deg > 45) and time.monotonic() < deadline:
+        time.sleep(0.02)
+    level = maps.level
+    maps.stop()
+    assert maps.runner.wait_idle(60)
+    grid = attitude_grid(45.0)
+    rows = {a: level.rows[a] for a in grid.attitudes()}
+    light = maps.map_scene
+    assert light.detector.pixels == 32 and light.fidelity == result.scene.fidelity
+
+    def points(pitch: float, azimuth: float) -> int:
+        return rows[(pitch, azimuth)]["n_target_points"]
+
+    az_edge = lesson.figures["az_edge"]
+    meridian = [a for a in rows if abs(a[0]) == 90 or a[1] in (az_edge, 360 - az_edge)]
+    solar = [a for a, r in rows.items() if r["dominant_material"] == "solar_panel"]
+    assert not set(solar) & set(meridian)  # "and in none on that meridian"
+    assert max(r["n_target_points"] for r in rows.values()) == points(0.0, 0.0)  # the brightest
+    return {
+        "px": light.detector.pixels,
+        "n_cells": len(grid),
+        "step": grid.step_deg,
+        "p0": 0.0,
+        "az0": 0.0,
+        "n_head": points(0.0, 0.0),
+        "n_back": points(0.0, 180.0),
+        "az_back": 180.0,
+        "az_edge": az_edge,
+        "n_edge_max": max(points(*a) for a in meridian),
+        "n_solar": len(solar),
+    }
+
+
 FIGURES = {
     "double-peak": figures_double_peak,
     "panels-azimuth": figures_panels_azimuth,
@@ -439,6 +481,7 @@ FIGURES = {
     "flyaround-edge-on": figures_flyaround_edge_on,
     "day-night": figures_day_night,
     "lm-vs-gm": figures_lm_vs_gm,
+    "panels-vanish": figures_panels_vanish,
 }
 
 

@@ -26,7 +26,7 @@ from app.logic import exports
 from app.logic.compare import FrameCompare
 from app.logic.controls import ControlPanel
 from app.logic.flyaround import FlyaroundLogic
-from app.logic.lessons import LessonGuide
+from app.logic.lessons import BY_KEY, LessonGuide
 from app.logic.links import controls_from_link, link_names, link_query
 from app.logic.pacing import FramePacer
 from app.logic.parts import PartHighlight
@@ -130,7 +130,9 @@ class AppLogic:
         server.trigger("export_scene")(self.export_scene)
         server.trigger("open_lesson")(self.open_lesson)
         server.trigger("leave_lesson")(self.lessons.leave)
-        self.physics = PhysicsPage(self.state)  # a card's "Read more" (its own state)
+        # a card's "Read more" and the physics page's sections (their own state)
+        self.physics = PhysicsPage(self.state, texts=BY_KEY)
+        server.trigger("read_more")(self.physics.read_more)
         server.trigger("open_physics")(self.physics.open)
         server.trigger("close_physics")(self.physics.close)
         server.controller.on_server_exited.add(lambda **_: self.runner.close())

@@ -79,6 +79,8 @@ class Lesson:
         (a template holds no digit of its own: every number on the card is a figure)
     reference : the section that explains it: ``docs/physics.md``, ``#``, one of its anchors
     reference_title : that section's title
+    read_more : the "Read more" text for the app's readers, Markdown with ``$...$`` maths (what
+        the equation says in words, then the equation; app.logic.physics_page draws it)
     figures : the card's numbers, each computed again by the tests
     color_by, image_kind : the display choices (``app.state.COLOR_BY``, ``IMAGE_KINDS``)
     mode, fly_t_s, fly_j2 : single frame, or the fly-around frame at ``fly_t_s`` [s]
@@ -94,6 +96,7 @@ class Lesson:
     try_next: str
     reference: str
     reference_title: str
+    read_more: str = ""
     figures: Mapping[str, float] = field(default_factory=dict)
     color_by: str = "range"
     image_kind: str = "range"
@@ -152,7 +155,7 @@ def lesson_from_record(record: Mapping[str, Any], source: str = "a lesson") -> L
         for name in ("settings", "figures"):
             if not isinstance(values.get(name, {}), Mapping):
                 raise TypeError(f"{name} is not a table")
-        for name in ("look", "why", "try_next", "key", "title", "reference", "view"):
+        for name in ("look", "why", "try_next", "key", "title", "reference", "view", "read_more"):
             if not isinstance(values.get(name, ""), str):
                 raise TypeError(f"{name} is not a string")
         figures = values.get("figures", {})

@@ -1,6 +1,7 @@
 """The lessons on the page: a panel in the drawer with one button per lesson, and the open
-lesson's card above the views (what to look at, why, what to try, the section to read) with a
-"Leave lesson" button. The records and what opening one sets are app.logic.lessons'."""
+lesson's card above the views (what to look at, why, what to try, a "Read more" text with its
+maths drawn) with a "Leave lesson" button. The records and what opening one sets are
+app.logic.lessons'."""
 
 from __future__ import annotations
 
@@ -83,17 +84,12 @@ def lesson_card() -> None:
                     html.Span(f"{{{{ lesson.{key} }}}}")
             with html.P(classes="lesson-text lesson-reference text-caption mb-0"):
                 html.Span("Read more: ", classes="lesson-label")
-                html.A(  # the physics page's section, in a dialog
+                html.A(  # the lesson's own text, its maths drawn, in a dialog
                     "{{ lesson.reference_title }}",
-                    v_if="physics_available",
-                    href=("'#' + lesson.reference.split('#')[1]",),
-                    click="$event.preventDefault(); trigger('open_physics', [lesson.reference])",
+                    href="#read-more",
+                    click="$event.preventDefault(); trigger('read_more', [lesson.key])",
                     classes="physics-link",
                 )
-                html.Span("{{ lesson.reference_title }}", v_else=True)
-                html.Span(", ")
-                html.Code("{{ lesson.reference }}")
-                html.Span(" in the project's docs.")
             html.P(
                 "{{ lesson.note }}",
                 v_if="lesson.note",
@@ -102,7 +98,9 @@ def lesson_card() -> None:
 
 
 def physics_dialog() -> None:
-    """The physics page's section a card's link opened (app.logic.physics_page)."""
+    """A card's "Read more" (or the physics page's section it leads to) in a dialog
+    (app.logic.physics_page): the text, its maths MathML, then the way to the full
+    derivation."""
     with v3.VDialog(
         model_value=("!!physics_section",),
         update_modelValue="$event || trigger('close_physics')",
@@ -125,8 +123,29 @@ def physics_dialog() -> None:
                     click="trigger('close_physics')",
                     **html_attributes(aria_label="Close the physics page"),
                 )
-            html.Div(
-                "docs/physics.md#{{ physics_section.anchor }}",
-                classes="text-caption hint px-4",
-            )
             v3.VCardText(v_html=("physics_section.html",), classes="physics-text")
+            with html.Div(
+                v_if="physics_section.kind === 'reader'", classes="px-4 pb-3 physics-more"
+            ):
+                html.Span("The full derivation, for those who want it: ", classes="text-caption")
+                html.A(  # the documentation site's physics page, where one is configured
+                    "the physics page of the documentation",
+                    v_if="physics_section.docs_url",
+                    href=("physics_section.docs_url",),
+                    target="_blank",
+                    rel="noopener",
+                    classes="text-caption physics-docs-link",
+                )
+                html.A(  # else the page's section itself, in this dialog
+                    "the physics page's section",
+                    v_else_if="physics_section.full",
+                    href="#physics",
+                    click="$event.preventDefault(); "
+                    "trigger('open_physics', [physics_section.anchor])",
+                    classes="text-caption physics-full-link",
+                )
+                html.Span(
+                    "the physics page of the documentation (docs/physics.md)",
+                    v_else=True,
+                    classes="text-caption",
+                )

@@ -118,3 +118,42 @@ def test_a_background_too_small_to_see_beside_the_echo_gets_its_own_axis(app):
     # on its own axis the level is a readable number of its unit, not a sliver of the echo's
     assert 1.0 <= max(level["y"]) < 1000.0 and echo_peak > 0
     change(app, sun_mode="none")
+
+
+def test_every_lessons_read_more_is_written_for_readers_with_its_maths_drawn(app, monkeypatch):
+    from app.logic.lessons import LESSONS
+    from app.logic.physics_page import DOCS_URL_ENV
+
+    monkeypatch.delenv(DOCS_URL_ENV, raising=False)
+    for lesson in LESSONS:
+        app.logic.physics.read_more(lesson.key)
+        shown = app.state.physics_section
+        assert shown["kind"] == "reader" and shown["title"] == lesson.reference_title
+        page = shown["html"]
+        assert page.count("<math") >= 1, lesson.key  # an equation, drawn
+        for raw in ("$", "\\frac", "\\text", "tests/", "simcore", ".py", "::", "docs/"):
+            assert raw not in page, (lesson.key, raw)
+        # the way to the full derivation: the physics page's own section, in the dialog
+        assert shown["docs_url"] == "" and shown["full"] is True
+        app.logic.physics.open(shown["anchor"])
+        full = app.state.physics_section
+        assert full["kind"] == "physics" and full["anchor"] == shown["anchor"]
+        assert "$" not in full["html"] and len(full["html"]) > 200
+    monkeypatch.setenv(DOCS_URL_ENV, "https://docs.example.org/lmapd/")
+    app.logic.physics.read_more("double-peak")
+    assert app.state.physics_section["docs_url"] == "https://docs.example.org/lmapd/physics/#eq-29"
+    for bad in ("no-such-lesson", 7, None, ["double-peak"]):
+        app.state.physics_section = None
+        app.logic.physics.read_more(bad)
+        assert app.state.physics_section is None
+        assert app.state.input_message == "Read more: no such lesson"
+
+
+def test_maths_the_markdown_holds_becomes_mathml_and_the_rest_stays_text():
+    from app.logic.physics_page import markdown_html
+
+    page = markdown_html(
+        "Rice's rate $\\nu_0\\,e^{-\\mathrm{TNR}^2/2}$ costs $5 or $6.\n\n$$t = \\frac{2r}{c}$$"
+    )
+    assert page.count("<math") == 2 and 'display="block"' in page and "<mfrac>" in page
+    assert "costs $5 or $6." in page  # a price is no formula: "$5 or $" has a space inside

@@ -55,7 +55,7 @@ def test_a_lesson_opens_with_its_card_and_its_selected_pixels(page, lessons_url,
     text = card.inner_text()
     shown = lesson.card()
     assert f"Lesson: {lesson.title}" in text
-    for part in ("look", "why", "try_next", "reference"):
+    for part in ("look", "why", "try_next", "reference_title"):
         assert shown[part] in text, part
     selection = [list(p) for p in lesson.selection]
     assert state(page, "selected_pixels") == selection

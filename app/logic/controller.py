@@ -308,6 +308,8 @@ class AppLogic:
         if plan is None:
             return
         self.selection.array_pixels = plan.controls.pixels  # the selection is on its array
+        self.compare.unpin()  # a lesson starts clean: no pinned frame, no highlighted part
+        self.parts.reset()
         generation = self.runner.generation
         with self.state:  # the change handlers submit the new scene, if it is one
             self.state.update(

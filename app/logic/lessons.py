@@ -16,6 +16,13 @@ options): a lesson starts from the app's initial controls and sets every control
 With another target (the drop-down, an upload, ``--scene``) a lesson still sets its controls, and
 its card says that its figures are the MRO's.
 
+A lesson starts clean: the views it does not name go to a stated state. The controls and the
+colour modes (``color_by``, ``image_kind``: the record's, default the range), the mode, the
+selection (the record's pixels only), no pinned frame and no highlighted part (the server); the
+array image showing the whole array, or zoomed to the selected pixels where the card is about
+the array image (``card()["zoom"]``), the waveform cursor cleared, no outline of an earlier
+lesson (the page: app/static/lesson.js). A lesson's link, ``?lesson=KEY``, opens it so.
+
 The parent (``AppLogic``) registers the page's ``open_lesson`` and ``leave_lesson`` triggers and
 calls :meth:`LessonGuide.plan` (what a lesson sets), :meth:`LessonGuide.opened` (the card on the
 page) and :meth:`LessonGuide.leave`. Leaving only hides the card: the scene stays as it is.
@@ -124,6 +131,9 @@ class Lesson:
             "note": "",
             "view": VIEWS[self.view][0],
             "view_selector": VIEWS[self.view][1],
+            # the array image: zoomed to the lesson's pixels where the card is about it, else
+            # the whole array (app/static/lesson.js)
+            "zoom": "pixels" if self.view == "array" else "whole",
         }
 
 
@@ -239,7 +249,9 @@ class LessonGuide:
         self.open_key: str | None = None
         self.state.lesson = None
         self.state.lesson_folded = False  # the card folded to one line (the page decides)
-        self.state.client_only("lesson_folded")
+        self.state.welcome_closed = False  # a first visit's welcome line closed (app.ui.lessons)
+        self.state.lesson_link_copied = ""  # what "Share this lesson" answered
+        self.state.client_only("lesson_folded", "welcome_closed", "lesson_link_copied")
 
     def plan(self, key: Any, initial: Controls) -> LessonPlan | None:
         """What lesson ``key`` sets, or None with a message on the page if there is no such

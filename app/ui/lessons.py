@@ -41,11 +41,19 @@ def lesson_card() -> None:
     """The open lesson's card, above the views (nothing when no lesson is open): folded, one
     line; unfolded, what to look at, why, what to try and where to read more."""
     client.ClientStateChange(
-        value="lesson", change="trame.utils.lmapdLesson && trame.utils.lmapdLesson.opened($event)"
+        value="lesson",
+        change="trame.utils.lmapdLesson && trame.utils.lmapdLesson.opened($event)",
+        trigger_on_create=True,  # a lesson's link: its card may be there before this is
     )
     client.ClientStateChange(
         value="frame_key", change="trame.utils.lmapdLesson && trame.utils.lmapdLesson.frame()"
     )
+    client.ClientStateChange(
+        value="lesson_folded",
+        change="trame.utils.lmapdLesson && trame.utils.lmapdLesson.folded($event)",
+    )
+    client.ClientStateChange(value="lesson", change="lesson_link_copied = ''")
+    welcome_line()
     with v3.VCard(
         v_if="lesson",
         classes=("['lesson-card mb-2', lesson_folded ? 'lesson-folded' : '']",),
@@ -70,6 +78,18 @@ def lesson_card() -> None:
                 **html_attributes(aria_expanded=("String(!lesson_folded)",)),
             )
             v3.VBtn(
+                "Share",
+                prepend_icon="mdi-link-variant",
+                size="small",
+                variant="text",
+                click=(
+                    "trame.utils.lmapdCopy(trame.utils.lmapdLink.url('lesson=' + lesson.key))"
+                    ".then((m) => { lesson_link_copied = m; })"
+                ),
+                classes="share-lesson",
+                **html_attributes(aria_label="Share this lesson (copy its link)"),
+            )
+            v3.VBtn(
                 "Leave lesson",
                 prepend_icon="mdi-close",
                 size="small",
@@ -77,6 +97,13 @@ def lesson_card() -> None:
                 click="trigger('leave_lesson')",
                 classes="leave-lesson",
             )
+        html.Div(
+            "{{ lesson_link_copied }}: whoever opens it gets this lesson, its card, views and "
+            "selection",
+            v_if="lesson_link_copied",
+            classes="text-caption text-success px-4 lesson-link-copied",
+            **html_attributes(role="status"),
+        )
         with v3.VCardText(v_show="!lesson_folded", classes="pt-1 pb-2 lesson-body"):
             for label, key in (("Look", "look"), ("Why", "why"), ("Try", "try_next")):
                 with html.P(classes=f"lesson-text lesson-{key.replace('_', '-')}"):
@@ -149,3 +176,32 @@ def physics_dialog() -> None:
                     v_else=True,
                     classes="text-caption",
                 )
+
+
+def welcome_line() -> None:
+    """A first visit's one line (``trame.utils.lmapdWelcome``, set by app/static/link.js from
+    this browser's storage): what the app is, "start here" (the first lesson) and, on a phone,
+    where the controls are. Closing it, or opening a lesson, keeps it away."""
+    first = LESSONS[0]
+    with v3.VAlert(
+        v_if="trame.utils.lmapdWelcome && !welcome_closed && !lesson",
+        type="info",
+        density="compact",
+        variant="tonal",
+        closable=True,
+        click_close="trame.utils.lmapdLesson.welcomed()",
+        classes="mb-2 welcome-line",
+        __events=[("click_close", "click:close")],
+        **html_attributes(role="status"),
+    ):
+        html.Span("Welcome: a laser camera in space, simulated. ")
+        html.A(
+            f"Start here: {first.title}",
+            href="#start",
+            click=f"$event.preventDefault(); trigger('open_lesson', ['{first.key}'])",
+            classes="font-weight-bold start-here",
+        )
+        html.Span(
+            " · the controls and the lessons are in the menu (☰, top left)",
+            classes="d-md-none welcome-menu",
+        )

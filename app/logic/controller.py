@@ -530,7 +530,7 @@ class AppLogic:
             "waveforms": waveforms,
             "view_text": waveforms_payload.view_text(frame.result.scene.receiver.kind),
             "snr_hist": frame.snr_histogram,
-            "stats": stats.with_chance_misses(frame.stats, frame.result),
+            "stats": stats.frame_rows(frame.stats, frame.result),
             "quality_rows": [],  # the frame shown has not been scored yet
             "stages": stats.stage_rows(
                 frame.timings_s,

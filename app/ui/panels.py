@@ -178,7 +178,7 @@ def array_card() -> None:
                     v_show="array_image.png",
                     classes="array-image",
                     draggable="false",
-                    alt="detector array image",
+                    alt=(ARRAY_DESCRIPTION,),
                     click=PIXEL_CLICK,
                     mousemove=PIXEL_HOVER,
                     mouseleave=HOVER_END,
@@ -287,8 +287,40 @@ def quality_block() -> None:
             _table("quality_rows", "row.label", "{{ row.label }}", "{{ row.value }}", "stat-value")
 
 
+# What a screen reader reads of the stats card and the array image, from each frame's figures
+STATS_KEY_ROWS = (
+    "Points",
+    "Target points",
+    "Outliers (false alarms)",
+    "Dropped pixels (missed)",
+    "Pixels with an echo (lit)",
+)
+STATS_DESCRIPTION = (
+    "'Statistics of this flash: ' + (stats || []).filter((r) => "
+    + repr(list(STATS_KEY_ROWS)).replace('"', "'")
+    + ".includes(r.label)).map((r) => r.label + ' ' + r.value).join(', ') + '.'"
+)
+ARRAY_DESCRIPTION = (
+    "'Detector array image, ' + array_image.pixels + ' by ' + array_image.pixels + ' pixels, "
+    "showing ' + ({ range: 'the range', peak_power: 'the peak power', background: 'the "
+    "background light', multi_peak: 'the pixels with two peaks' })[image_kind] + ', with ' + "
+    "n_points.toLocaleString() + ' points; selected: ' + (selected_pixels.length ? "
+    "selected_pixels.map((p) => 'row ' + p[0] + ' column ' + p[1]).join(', ') : 'none') + '.'"
+)
+
+
 def stats_card() -> None:
-    with v3.VCard(classes="view-card stats-card", elevation=1):
+    with v3.VCard(
+        classes="view-card stats-card",
+        elevation=1,
+        **html_attributes(aria_describedby="stats-description"),
+    ):
+        html.P(
+            (f"{{{{ {STATS_DESCRIPTION} }}}}"),
+            id="stats-description",
+            classes="sr-only",
+            **html_attributes(aria_live="polite"),
+        )
         with v3.VCardTitle(classes="card-title d-flex align-center flex-wrap ga-2"):
             html.Span("Statistics of this flash")
             v3.VSpacer()

@@ -209,3 +209,33 @@ def test_maths_the_markdown_holds_becomes_mathml_and_the_rest_stays_text():
     )
     assert page.count("<math") == 2 and 'display="block"' in page and "<mfrac>" in page
     assert "costs $5 or $6." in page  # a price is no formula: "$5 or $" has a space inside
+
+
+def test_a_refusal_writes_its_figure_and_its_limit_alike():
+    from app.engine import about
+
+    assert about(8e6) == about(7_990_000.0) == "8,000,000"
+    assert about(12_345_678.0) == "12,000,000" and about(0.5) == "0.5" and about(96.0) == "96"
+
+
+def test_the_stats_give_the_range_error_beside_its_sigma_and_the_background_where_it_lights(app):
+    # the orbit's Sun at its epoch: the target mostly in shade, a few pixels lit (the median
+    # over every pixel with an echo is 0 W)
+    change(app, sun_mode="orbit", tnr=5.0)
+    result = app.logic.last_frame.result
+    d = result.detection
+    error_m = np.abs(d.range_m - d.range_true_m)[d.detected]
+    labels = [row["label"] for row in app.state.stats]
+    at = labels.index("Median range σ")
+    assert labels[at + 1] == "Median range error (against the noise-free range)"
+    assert stat(app, labels[at + 1]) == f"{np.median(error_m) * 100:.3g} cm"
+    power = result.background.power_w.ravel()
+    lit = power[power > 0]
+    assert 0 < len(lit) < len(power)
+    shown = stat(app, "Median background power (pixels in light)")
+    from app.payloads.encode import si_text
+
+    assert shown == si_text(float(np.median(lit)), "W") and not shown.startswith("0 ")
+    assert stat(app, "Pixels in background light").startswith(f"{len(lit):,d} of {len(power):,d}")
+    assert "Median background power" not in labels  # one figure, named for what it is
+    change(app, sun_mode="none")

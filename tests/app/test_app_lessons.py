@@ -412,6 +412,12 @@ def figures_lm_vs_gm(app, pipeline, result) -> dict:
 
     d = result.detection
     assert np.median((d.range_m - d.range_true_m)[d.detected]) < 0  # early: the onset
+    # the card: the error, as the stats name it, exceeds the median range sigma beside it
+    rows = {row["label"]: row["value"] for row in app.state.stats}
+    assert rows["Median range error (against the noise-free range)"] == (
+        f"{range_error_m(result) * 100:.3g} cm"
+    )
+    assert range_error_m(result) > summary(result, "range_sigma_m_median")
     return {
         "d": result.scene.pose.distance_m,
         "energy_mj": energy_mj(lesson),

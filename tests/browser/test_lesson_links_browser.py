@@ -3,13 +3,16 @@ draws its maths and shows no LaTeX or test names; a lesson starts clean (lesson 
 6: the whole array, its selected pixel in view, one outline); ``?lesson=KEY`` opens the lesson
 with its card and its view in sight at 1280 x 720 and on a phone, the view's name whole, the
 card unfolded with its view below it; "Share this lesson" writes the link; a first visit's
-welcome line starts the first lesson."""
+welcome line starts the first lesson; the Geiger-mode chart opens on the echo, the whole window
+a click away; a pixel whose stop went to a false alarm says so (checked against the core's own
+stops), and the stats' screen-reader description names the point count shown."""
 
 from __future__ import annotations
 
 import pytest
 from support.launch import JS_STATE, app_server, wait_first_frame, wait_settled
 
+import simcore
 from app.logic.lessons import BY_KEY, LESSONS
 
 pytestmark = pytest.mark.browser
@@ -86,6 +89,15 @@ def test_lesson_8_after_lesson_6_shows_the_whole_array_with_its_selected_pixel(p
     assert state(page, "array_zoom")["s"] > 1  # lesson 6's card is about the array: zoomed
     open_lesson(page, "lm-vs-gm")
     assert state(page, "array_zoom") == {"s": 1, "x": 0, "y": 0}
+    # the Geiger-mode chart: opened on the echo, the whole window one click away
+    plot = page.locator(".waveform-card .js-plotly-plot")
+    echo = plot.evaluate("(p) => p.layout.xaxis.range.slice()")
+    page.locator(".waveform-card .updatemenu-button", has_text="Whole window").click()
+    page.wait_for_function(
+        "(r) => { const p = document.querySelector('.waveform-card .js-plotly-plot');"
+        " return p.layout.xaxis.range[1] - p.layout.xaxis.range[0] > 1.5 * (r[1] - r[0]); }",
+        arg=echo,
+    )
     assert state(page, "selected_pixels") == [list(p) for p in BY_KEY["lm-vs-gm"].selection]
     page.locator(".array-card").scroll_into_view_if_needed()
     image, marker = box(page, ".array-box"), box(page, ".pixel-marker")
@@ -169,3 +181,46 @@ def test_a_first_visit_says_welcome_and_starts_the_first_lesson(page, links_url,
     wait_first_frame(page)
     page.wait_for_timeout(500)
     assert page.locator(".welcome-line").count() == 0  # once per browser
+
+
+def test_a_pixel_taken_by_a_false_alarm_is_labelled_so_and_the_stats_are_described(page, links_url):
+    # a scene built for it: strong echoes under a low threshold, false alarms in a fifth of the
+    # pixels; the frame the page shows is the core's (same seed), whose stops are read here
+    page.set_viewport_size({"width": 1280, "height": 900})
+    page.goto(links_url + "&pixels=64&tnr=4")
+    wait_first_frame(page)
+    page.evaluate("() => window.trame.trigger('leave_lesson')")
+    page.wait_for_function("() => window.trame.state.get('tnr') === 4")
+    wait_settled(page, 120)
+    result = simcore.simulate(overrides={"preset": "interactive"}, pixels=64, tnr=4.0)
+    d = result.detection
+    alarms: dict[int, list[float]] = {}
+    for pixel, range_m in zip(d.outliers.pixel.tolist(), d.outliers.range_m.tolist(), strict=True):
+        alarms.setdefault(pixel, []).append(range_m)
+    taken = [  # (flat pixel, the false alarm before its echo) of the echoes not detected
+        (pixel, min(alarms[pixel]))
+        for i, pixel in enumerate(result.echo.pixel.tolist())
+        if not d.detected[i] and any(r < d.range_true_m[i] for r in alarms.get(pixel, []))
+    ]
+    assert len(taken) >= 3
+    row = page.locator(".stats-table tr", has_text="Taken by a false alarm")
+    assert row.locator(".stat-value").inner_text() == f"{len(taken):,d}"
+    (pixel, alarm_m) = taken[0]
+    generation = state(page, "frame_generation")
+    page.evaluate("(rc) => window.trame.trigger('pixel_click', rc)", list(divmod(pixel, 64)))
+    page.wait_for_function(
+        "(g) => window.trame.state.get('frame_generation') > g"
+        " || ((window.trame.state.get('waveforms') || {}).data || []).some("
+        "(t) => (t.name || '').includes('taken by'))",
+        arg=generation,
+    )
+    legend = page.locator(".waveform-card .legendtext", has_text="taken by a false alarm")
+    legend.first.wait_for()
+    assert f"taken by a false alarm at {alarm_m:.1f} m" in legend.first.text_content()
+    # the screen reader's description of the stats names the point count shown
+    shown = page.locator(".point-count").inner_text().split()[0]
+    said = page.locator("#stats-description").inner_text()
+    assert f"Points {shown}," in said and said.startswith("Statistics of this flash: ")
+    assert page.locator(".stats-card").get_attribute("aria-describedby") == "stats-description"
+    alt = page.locator(".array-image").get_attribute("alt")
+    assert alt.startswith("Detector array image, 64 by 64 pixels") and f"{shown} points" in alt

@@ -38,6 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from app.logic.links import controls_from_link
+from app.logic.words import linked_html
 from app.state import MAX_SELECTED_PIXELS, Controls, echo
 from simcore._assets import ASSETS_DIR
 
@@ -82,8 +83,10 @@ class Lesson:
     title : the button's and the card's title
     settings : the scene's link settings that differ from ``PAPER_SETTINGS`` (SI units)
     selection : the pixels to select, (row, col) on the lesson's array
-    look, why, try_next : the card's three paragraphs, ``str.format`` templates of ``figures``
-        (a template holds no digit of its own: every number on the card is a figure)
+    basic : the card's text for a reader of 14-16, a template of ``figures`` as the others
+    look, why, try_next : the card's three paragraphs of "More detail", ``str.format``
+        templates of ``figures`` (a template holds no digit of its own: every number on the
+        card is a figure)
     reference : the section that explains it: ``docs/physics.md``, ``#``, one of its anchors
     reference_title : that section's title
     read_more : the "Read more" text for the app's readers, Markdown with ``$...$`` maths (what
@@ -103,6 +106,7 @@ class Lesson:
     try_next: str
     reference: str
     reference_title: str
+    basic: str = ""
     read_more: str = ""
     figures: Mapping[str, float] = field(default_factory=dict)
     color_by: str = "range"
@@ -120,12 +124,16 @@ class Lesson:
     def card(self, figures: Mapping[str, float] | None = None) -> dict[str, str]:
         """The card's text, with ``figures`` (default: the record's) in its templates."""
         values = self.figures if figures is None else figures
+        texts = {
+            name: getattr(self, name).format_map(values)
+            for name in ("basic", "look", "why", "try_next")
+        }
         return {
             "key": self.key,
             "title": self.title,
-            "look": self.look.format_map(values),
-            "why": self.why.format_map(values),
-            "try_next": self.try_next.format_map(values),
+            **texts,
+            # the same, their glossary words linked (app.logic.words)
+            **{f"{name}_html": linked_html(text) for name, text in texts.items()},
             "reference": self.reference,
             "reference_title": self.reference_title,
             "note": "",
@@ -142,6 +150,7 @@ class LessonError(ValueError):
 
 
 LESSON_FIELDS = tuple(f.name for f in dataclasses.fields(Lesson))
+TEXT_FIELDS = ("look", "why", "try_next", "basic", "key", "title", "reference", "view", "read_more")
 REQUIRED_FIELDS = tuple(
     f.name
     for f in dataclasses.fields(Lesson)
@@ -165,7 +174,7 @@ def lesson_from_record(record: Mapping[str, Any], source: str = "a lesson") -> L
         for name in ("settings", "figures"):
             if not isinstance(values.get(name, {}), Mapping):
                 raise TypeError(f"{name} is not a table")
-        for name in ("look", "why", "try_next", "key", "title", "reference", "view", "read_more"):
+        for name in TEXT_FIELDS:
             if not isinstance(values.get(name, ""), str):
                 raise TypeError(f"{name} is not a string")
         figures = values.get("figures", {})
@@ -251,7 +260,10 @@ class LessonGuide:
         self.state.lesson_folded = False  # the card folded to one line (the page decides)
         self.state.welcome_closed = False  # a first visit's welcome line closed (app.ui.lessons)
         self.state.lesson_link_copied = ""  # what "Share this lesson" answered
-        self.state.client_only("lesson_folded", "welcome_closed", "lesson_link_copied")
+        self.state.lesson_detail = False  # the card's "More detail" shown
+        self.state.client_only(
+            "lesson_folded", "welcome_closed", "lesson_link_copied", "lesson_detail"
+        )
 
     def plan(self, key: Any, initial: Controls) -> LessonPlan | None:
         """What lesson ``key`` sets, or None with a message on the page if there is no such

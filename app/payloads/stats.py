@@ -101,6 +101,43 @@ def with_chance_misses(rows: list[dict], result: simcore.Result) -> list[dict]:
     return rows + added if at is None else [*rows[: at + 1], *added, *rows[at + 1 :]]
 
 
+# a stats row's glossary entry (app.ui.glossary), by the start of its label: its info button
+STAT_TERMS: tuple[tuple[str, str], ...] = (
+    ("Points", "Point cloud"),
+    ("Target points", "Point cloud"),
+    ("Outliers", "Outlier"),
+    ("Dropped pixels", "P_d"),
+    ("Taken by a false alarm", "Stop"),
+    ("Missed by chance", "P_d"),
+    ("Unlit pixels", "Pixel"),
+    ("Pixels seeing the target", "Pixel"),
+    ("Pixels with an echo", "Echo"),
+    ("Mean detection probability", "P_d"),
+    ("Median SNR", "SNR"),
+    ("Median count SNR", "SNR"),
+    ("Median range σ", "σ (sigma)"),
+    ("Median range error", "Range"),
+    ("Sun from the line of sight", "Background light"),
+    ("Sunlit / Earth pixels", "Background light"),
+    ("Median background power", "Background light"),
+    ("Pixels in background light", "Background light"),
+    ("Max background current", "Background light"),
+    ("Background share of noise", "Shot noise"),
+    ("Background light", "Background light"),
+    ("Receiver", "Lidar"),
+)
+
+
+def with_terms(rows: list[dict]) -> list[dict]:
+    """``rows`` with, for a row whose label :data:`STAT_TERMS` knows, its glossary ``term``
+    (the page's info button opens the glossary there; a test checks each has an entry)."""
+    out = []
+    for row in rows:
+        term = next((t for start, t in STAT_TERMS if row["label"].startswith(start)), None)
+        out.append(row if term is None else {**row, "term": term})
+    return out
+
+
 BACKGROUND_LABEL = "Median background power (pixels in light)"
 RANGE_ERROR_LABEL = "Median range error (against the noise-free range)"
 
@@ -133,7 +170,7 @@ def frame_rows(rows: list[dict], result: simcore.Result) -> list[dict]:
         out.append(row)
         if row["label"] == "Median range σ":
             out.append(error_row)
-    return out
+    return with_terms(out)
 
 
 def _declared(summary: dict) -> receivers.Receiver:

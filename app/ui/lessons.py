@@ -11,6 +11,12 @@ from trame.widgets import vuetify3 as v3
 from app.logic import LESSONS
 from app.ui.widgets import html_attributes
 
+# a click on a card's glossary word (app.logic.words) opens the glossary at its entry
+GLOSSARY_LINK = (
+    "$event.target.dataset && $event.target.dataset.term && ($event.preventDefault(), "
+    "glossary_term = $event.target.dataset.term, glossary_open = true)"
+)
+
 
 def lessons_panel() -> None:
     """The drawer's "Lessons" panel: a button per lesson (``open_lesson`` with its key)."""
@@ -104,11 +110,25 @@ def lesson_card() -> None:
             classes="text-caption text-success px-4 lesson-link-copied",
             **html_attributes(role="status"),
         )
-        with v3.VCardText(v_show="!lesson_folded", classes="pt-1 pb-2 lesson-body"):
-            for label, key in (("Look", "look"), ("Why", "why"), ("Try", "try_next")):
-                with html.P(classes=f"lesson-text lesson-{key.replace('_', '-')}"):
-                    html.Span(f"{label}: ", classes="lesson-label")
-                    html.Span(f"{{{{ lesson.{key} }}}}")
+        with v3.VCardText(
+            v_show="!lesson_folded", classes="pt-1 pb-2 lesson-body", click=GLOSSARY_LINK
+        ):
+            html.P(v_html=("lesson.basic_html",), classes="lesson-text lesson-basic")
+            v3.VBtn(
+                "{{ lesson_detail ? 'Less detail' : 'More detail' }}",
+                prepend_icon=("lesson_detail ? 'mdi-chevron-up' : 'mdi-chevron-down'",),
+                size="x-small",
+                variant="text",
+                color="primary",
+                click="lesson_detail = !lesson_detail",
+                classes="lesson-detail-button mb-1",
+                **html_attributes(aria_expanded=("String(!!lesson_detail)",)),
+            )
+            with html.Div(v_show="lesson_detail", classes="lesson-detail"):
+                for label, key in (("Look", "look"), ("Why", "why"), ("Try", "try_next")):
+                    with html.P(classes=f"lesson-text lesson-{key.replace('_', '-')}"):
+                        html.Span(f"{label}: ", classes="lesson-label")
+                        html.Span(v_html=(f"lesson.{key}_html",))
             with html.P(classes="lesson-text lesson-reference text-caption mb-0"):
                 html.Span("Read more: ", classes="lesson-label")
                 html.A(  # the lesson's own text, its maths drawn, in a dialog

@@ -257,11 +257,29 @@ def waveform_card() -> None:
             )
 
 
-def _table(rows: str, key: str, label: str, value: str, value_class: str) -> None:
+def _table(
+    rows: str, key: str, label: str, value: str, value_class: str, info: bool = False
+) -> None:
+    """A table of ``rows``; ``info``: a row with a glossary term (``row.term``) has an info
+    button that opens the glossary there."""
     with v3.VTable(density="compact", classes="stats-table"):
         with html.Tbody():
             with html.Tr(v_for=f"row in {rows}", key=key):
-                html.Td(label)
+                with html.Td():
+                    html.Span(label)
+                    if info:
+                        v3.VBtn(
+                            v_if="row.term",
+                            icon="mdi-information-outline",
+                            size="x-small",
+                            density="compact",
+                            variant="text",
+                            color="primary",
+                            title=("'What is ' + row.term + '? (the glossary)'",),
+                            click="glossary_term = row.term; glossary_open = true",
+                            classes="info-button stats-info ml-1",
+                            **html_attributes(aria_label=("'What is ' + row.term + '?'",)),
+                        )
                 html.Td(value, classes=value_class)
 
 
@@ -328,7 +346,9 @@ def stats_card() -> None:
         compare.compare_table()
         with html.Div(classes="stats-grid"):  # side by side where the card is wide enough
             with html.Div():
-                _table("stats", "row.label", "{{ row.label }}", "{{ row.value }}", "stat-value")
+                _table(
+                    "stats", "row.label", "{{ row.label }}", "{{ row.value }}", "stat-value", True
+                )
             with html.Div():
                 html.Div("Time per stage (ms)", classes="subtitle text-caption px-2")
                 _table(

@@ -239,3 +239,43 @@ def test_the_stats_give_the_range_error_beside_its_sigma_and_the_background_wher
     assert stat(app, "Pixels in background light").startswith(f"{len(lit):,d} of {len(power):,d}")
     assert "Median background power" not in labels  # one figure, named for what it is
     change(app, sun_mode="none")
+
+
+def test_every_glossary_word_on_a_card_links_to_its_entry():
+    import html
+    import re
+
+    from app.logic.lessons import LESSONS
+    from app.logic.words import CARD_WORDS
+
+    assert set(CARD_WORDS) <= set(GLOSSARY)
+    # the words the classroom found unexplained on the cards
+    for word in ("shot noise", "Rice's rate", "BRDF", "AC-coupled", "Coates' correction"):
+        assert any(word in forms for forms in CARD_WORDS.values()), word
+    assert "photoelectron" in CARD_WORDS["Photoelectron"] and "σ" in CARD_WORDS["σ (sigma)"]
+    link = re.compile(r'<a href="#glossary" class="glossary-link" data-term="([^"]+)">.*?</a>')
+    used = set()
+    for lesson in LESSONS:
+        card = lesson.card()
+        for name in ("basic", "look", "why", "try_next"):
+            page = card[f"{name}_html"]
+            assert html.unescape(re.sub(r"<[^>]+>", "", page)) == card[name]  # the same text
+            linked = {html.unescape(t) for t in link.findall(page)}
+            used |= linked
+            rest = html.unescape(link.sub(" ", page))  # the words left unlinked
+            for term, forms in CARD_WORDS.items():
+                for form in forms:
+                    found = re.search(rf"(?<![\w'-]){re.escape(form)}(?![\w-])", rest, re.I)
+                    assert found is None or term in linked, (lesson.key, name, form)
+    for word in ("Shot noise", "Rice's rate", "AC-coupled", "Coates' correction", "σ (sigma)"):
+        assert word in used, word  # each is on a card, and linked there
+    assert "Photoelectron" in used
+
+
+def test_the_stats_rows_have_glossary_entries(app):
+    change(app, pulse_energy_mj=5.0, tnr=5.0, sun_mode="none")
+    terms = {row["label"]: row.get("term") for row in app.state.stats}
+    assert terms["Points"] == "Point cloud" and terms["Median range σ"] == "σ (sigma)"
+    assert terms["Taken by a false alarm (its stop used)"] == "Stop"
+    assert all(term in GLOSSARY for term in terms.values() if term)
+    assert sum(1 for term in terms.values() if term) >= len(terms) - 2

@@ -224,3 +224,29 @@ def test_a_pixel_taken_by_a_false_alarm_is_labelled_so_and_the_stats_are_describ
     assert page.locator(".stats-card").get_attribute("aria-describedby") == "stats-description"
     alt = page.locator(".array-image").get_attribute("alt")
     assert alt.startswith("Detector array image, 64 by 64 pixels") and f"{shown} points" in alt
+
+
+def test_a_cards_glossary_words_and_the_stats_info_buttons_open_the_glossary(page, links_url):
+    page.set_viewport_size({"width": 1280, "height": 1000})
+    page.goto(links_url)
+    wait_first_frame(page)
+    open_lesson(page, "tnr-trade")
+    if state(page, "lesson_folded"):
+        page.locator(".fold-lesson").click()
+    page.locator(".lesson-detail-button").click()
+    words = page.locator(".lesson-card .glossary-link")
+    terms = set(words.evaluate_all("(links) => links.map((a) => a.dataset.term)"))
+    assert {"Rice's rate", "σ (sigma)", "Threshold", "False alarm"} <= terms
+    page.locator('.lesson-card .glossary-link[data-term="Rice\'s rate"]').first.click()
+    asked = page.locator(".glossary-asked .glossary-term")
+    asked.wait_for()
+    assert asked.inner_text() == "Rice's rate"
+    listed = {t.strip() for t in page.locator(".glossary-list .glossary-term").all_text_contents()}
+    assert terms <= listed  # every card word links to an entry of the glossary's list
+    page.get_by_role("button", name="Close the glossary").click()
+    page.wait_for_function("() => !window.trame.state.get('glossary_open')")
+    button = page.get_by_role("button", name="What is σ (sigma)?")
+    button.scroll_into_view_if_needed()
+    button.click()
+    asked.wait_for()
+    assert asked.inner_text() == "σ (sigma)"

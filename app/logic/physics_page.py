@@ -100,11 +100,13 @@ def section_html(markdown_text: str) -> str:
     return markdown_html(markdown_text)
 
 
-def docs_url(anchor: str) -> str:
-    """The physics page's section ``anchor`` on the documentation site (``LMAPD_DOCS_URL``,
-    mkdocs' ``physics/`` page), or "" where no site is configured."""
+def docs_url(anchor: str, page: str = "physics") -> str:
+    """Section ``anchor`` of a page of the documentation site (``LMAPD_DOCS_URL``, mkdocs'
+    ``PAGE/`` address; default the physics page), or "" where no site is configured."""
     base = os.environ.get(DOCS_URL_ENV, "").strip().rstrip("/")
-    return f"{base}/physics/#{anchor}" if base.startswith(("http://", "https://")) else ""
+    if not base.startswith(("http://", "https://")):
+        return ""
+    return f"{base}/{page}/" + (f"#{anchor}" if anchor else "")
 
 
 class PhysicsPage:
@@ -117,6 +119,7 @@ class PhysicsPage:
         self.texts = texts or {}  # lesson key -> the Lesson (its read_more, title, reference)
         state.physics_section = None
         state.physics_available = bool(_lines(path))
+        state.teaching_url = docs_url("", "teaching")  # the teacher's guide (the glossary links it)
 
     def read_more(self, key: Any = None, *_: Any, **__: Any) -> None:
         """Show lesson ``key``'s "Read more" (from the page: anything at all); an unknown one

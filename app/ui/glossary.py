@@ -226,6 +226,21 @@ def glossary_dialog() -> None:
                     **html_attributes(aria_label="Close the glossary"),
                 )
             with v3.VCardText():
+                with html.P(classes="text-caption mb-2 teaching-guide"):
+                    html.Span("For teachers: ")
+                    html.A(
+                        "the teacher's guide",
+                        v_if="teaching_url",
+                        href=("teaching_url",),
+                        target="_blank",
+                        rel="noopener",
+                    )
+                    html.Span("the teacher's guide (docs/teaching.md)", v_else=True)
+                    html.Span(
+                        " gives each lesson's learning goal, questions to ask, what students "
+                        "get wrong and how long it takes, and how to run a class with one link "
+                        "per lesson."
+                    )
                 with html.Dl(classes="glossary-list"):
                     for term, text in GLOSSARY.items():
                         quoted = js_text(term)

@@ -226,7 +226,18 @@ CURSOR_CLICK = "wave_cursor = trame.utils.lmapdCursor.click($event)"
 
 
 def waveform_card() -> None:
-    with v3.VCard(classes="view-card waveform-card", elevation=1):
+    with v3.VCard(
+        classes="view-card waveform-card",
+        elevation=1,
+        **html_attributes(aria_describedby="waveform-description"),
+    ):
+        html.P(  # the chart's traces in words: each selected pixel's echo and what became of it
+            "{{ view_text.waveform_title + ': ' + (((waveforms || {}).data || []).filter((t) =>"
+            " t.showlegend !== false && t.name && t.name.startsWith('(')).map((t) => t.name)"
+            ".join('; ') || 'no pixel selected') + '.' }}",
+            id="waveform-description",
+            classes="sr-only",
+        )
         with v3.VCardTitle(classes="card-title"):
             html.Span("{{ view_text.waveform_title }}")
         html.Div("{{ view_text.waveform_caption }}", classes="hint text-caption px-4")

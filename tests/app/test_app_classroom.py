@@ -279,3 +279,22 @@ def test_the_stats_rows_have_glossary_entries(app):
     assert terms["Taken by a false alarm (its stop used)"] == "Stop"
     assert all(term in GLOSSARY for term in terms.values() if term)
     assert sum(1 for term in terms.values() if term) >= len(terms) - 2
+
+
+def test_the_teachers_guide_covers_every_lesson_and_the_glossary_links_it(monkeypatch):
+    from pathlib import Path
+
+    from app.logic.lessons import LESSONS
+    from app.logic.physics_page import DOCS_URL_ENV, docs_url
+
+    guide = (Path(__file__).resolve().parents[2] / "docs" / "teaching.md").read_text()
+    for lesson in LESSONS:  # each lesson: its link's key, goal, questions, mistakes, time
+        at = guide.index(f"(`{lesson.key}`)")
+        section = guide[at : guide.find("\n### ", at) if "\n### " in guide[at:] else None]
+        for part in ("Learning goal", "Questions to ask", "What students get wrong", "Time"):
+            assert f"**{part}:**" in section, (lesson.key, part)
+    assert "?lesson=double-peak" in guide
+    monkeypatch.setenv(DOCS_URL_ENV, "https://docs.example.org/lmapd")
+    assert docs_url("", "teaching") == "https://docs.example.org/lmapd/teaching/"
+    monkeypatch.setenv(DOCS_URL_ENV, "javascript:alert(1)")
+    assert docs_url("eq-29") == ""  # only a web address

@@ -15,7 +15,7 @@ from support.launch import JS_STATE, app_server, wait_first_frame, wait_settled
 import simcore
 from app.logic.lessons import BY_KEY, LESSONS
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.browser, pytest.mark.slow]  # about 3 minutes, the server's start included
 
 
 @pytest.fixture(scope="module")
@@ -222,6 +222,11 @@ def test_a_pixel_taken_by_a_false_alarm_is_labelled_so_and_the_stats_are_describ
     said = page.locator("#stats-description").inner_text()
     assert f"Points {shown}," in said and said.startswith("Statistics of this flash: ")
     assert page.locator(".stats-card").get_attribute("aria-describedby") == "stats-description"
+    chart = page.locator("#waveform-description").text_content()
+    assert f"taken by a false alarm at {alarm_m:.1f} m" in chart
+    cloud = page.locator("#cloud-description").text_content()
+    assert cloud.startswith("The point cloud: ") and "outliers (false alarms)" in cloud
+    assert "The 3D scene: " in page.locator("#scene-description").text_content()
     alt = page.locator(".array-image").get_attribute("alt")
     assert alt.startswith("Detector array image, 64 by 64 pixels") and f"{shown} points" in alt
 

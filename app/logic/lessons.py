@@ -20,8 +20,8 @@ A lesson starts clean: the views it does not name go to a stated state. The cont
 colour modes (``color_by``, ``image_kind``: the record's, default the range), the mode, the
 selection (the record's pixels only), no pinned frame and no highlighted part (the server); the
 array image showing the whole array, or zoomed to the selected pixels where the card is about
-the array image (``card()["zoom"]``), the waveform cursor cleared, no outline of an earlier
-lesson (the page: app/static/lesson.js). A lesson's link, ``?lesson=KEY``, opens it so.
+the array image (``card()["zoom"]``), the 3D views at their home cameras, the waveform cursor
+cleared, no outline of an earlier lesson (the page: app/static/lesson.js). A lesson's link, ``?lesson=KEY``, opens it so.
 
 The parent (``AppLogic``) registers the page's ``open_lesson`` and ``leave_lesson`` triggers and
 calls :meth:`LessonGuide.plan` (what a lesson sets), :meth:`LessonGuide.opened` (the card on the

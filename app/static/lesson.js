@@ -1,7 +1,8 @@
 // Lessons on the page (app.ui.lessons): trame.utils.lmapdLesson.
 // A lesson opened (the lesson state changed to a card) starts clean: every outline of an earlier
 // lesson goes, the array image shows the whole array (zoomed to the lesson's pixels where the
-// card is about the array image) and the chart's cursor is cleared (the server sets the
+// card is about the array image), the 3D views go back to their home cameras and the chart's
+// cursor is cleared (the server sets the
 // controls, colour mode, selection, and unpins a pinned frame: app.logic.lessons). On a phone or
 // a narrow window the drawer closes; on a short screen (under 1000 px) the card folds to one
 // line (its title, the view it is about and a button to unfold it); the card stays at the top
@@ -19,6 +20,10 @@ window.trame.utils.lmapdLesson = {
     this.welcomed();
     if (window.innerWidth < 960) state.set('main_drawer', false);
     state.set('wave_cursor', '');
+    ['scene_view', 'cloud_view'].forEach((ref) => {  // the 3D views' cameras: their own home
+      const view = window.trame.refs && window.trame.refs[ref];
+      if (view && view.resetCamera) view.resetCamera();
+    });
     if (lesson.zoom === 'pixels') this.zoomTo(state.get('selected_pixels'));
     else state.set('array_zoom', { s: 1, x: 0, y: 0 });
     state.set('lesson_folded', window.innerHeight < 1000);

@@ -153,6 +153,12 @@ def test_a_lessons_link_opens_its_card_and_its_view_in_sight(page, links_url, wi
         page.wait_for_timeout(700)
         card, view = box(page, ".lesson-card"), box(page, ".waveform-card")
         assert card["bottom"] <= view["top"] + 1 and view["top"] < height, (card, view)
+    # the app bar's title whole; on a phone Plotly's toolbar off the chart's legend
+    title = page.locator(".v-app-bar .v-toolbar-title__placeholder")
+    assert title.evaluate("(e) => e.scrollWidth <= e.clientWidth + 1"), title.inner_text()
+    toolbar = page.locator(".waveform-card .modebar-container")
+    shown = toolbar.evaluate("(e) => getComputedStyle(e).display !== 'none'")
+    assert toolbar.count() == 1 and shown == (width >= 600)
     # "Share this lesson" writes the lesson's link
     page.locator(".share-lesson").click()
     page.locator(".lesson-link-copied").wait_for()

@@ -21,7 +21,8 @@ colour modes (``color_by``, ``image_kind``: the record's, default the range), th
 selection (the record's pixels only), no pinned frame and no highlighted part (the server); the
 array image showing the whole array, or zoomed to the selected pixels where the card is about
 the array image (``card()["zoom"]``), the 3D views at their home cameras, the waveform cursor
-cleared, no outline of an earlier lesson (the page: app/static/lesson.js). A lesson's link, ``?lesson=KEY``, opens it so.
+cleared, no outline of an earlier lesson (the page: app/static/lesson.js). A lesson's link,
+``?lesson=KEY``, opens it so.
 
 The parent (``AppLogic``) registers the page's ``open_lesson`` and ``leave_lesson`` triggers and
 calls :meth:`LessonGuide.plan` (what a lesson sets), :meth:`LessonGuide.opened` (the card on the

@@ -99,10 +99,18 @@ def check_budget(pipeline: simcore.Pipeline, scene: simcore.Scene) -> None:
     most = MAX_FRAME_RECORD_BYTES / load.bytes_each
     if load.count > most or not load.within_core_limits:
         raise FrameRefused(
-            f"this frame would record about {load.count:.2g} {load.units} "
-            f"({load.count * load.bytes_each / 1e9:.2g} GB; at most {most:,.0f} per "
+            f"this frame would record about {about(load.count)} {load.units} "
+            f"({load.count * load.bytes_each / 1e9:.2g} GB; at most {about(most)} per "
             f"frame here): {load.advice}"
         )
+
+
+def about(count: float) -> str:
+    """A count as a refusal gives it: two significant digits, written out with thousands
+    separators (``8,000,000``, ``12,000,000``, ``0.5``), the same way for the figure refused and
+    for the limit (they read "about 8e+06 ... at most 8,000,000" before)."""
+    rounded = float(f"{count:.2g}")
+    return f"{rounded:,.0f}" if abs(rounded) >= 10 else f"{rounded:g}"
 
 
 @dataclass(frozen=True)

@@ -17,10 +17,14 @@ _CHECKOUT_ASSETS = Path(__file__).resolve().parent.parent / "assets"
 def assets_dir() -> Path:
     """The folder of the built-in assets (``targets/``, ``scenes/``, ``sweeps/``, ...).
 
-    ``simcore.assets`` through :mod:`importlib.resources` when the package is installed (a wheel or
-    an editable install); the checkout's ``assets/`` beside the package when it is run from a source
-    tree that was never installed (``PYTHONPATH=.``).
+    The checkout's ``assets/`` beside the package when it is run from a source tree (its
+    ``pyproject.toml`` beside it: ``PYTHONPATH=.``, or an editable install of that tree), else
+    ``simcore.assets`` through :mod:`importlib.resources` (a wheel).
     """
+    if (_CHECKOUT_ASSETS.parent / "pyproject.toml").is_file() and _CHECKOUT_ASSETS.is_dir():
+        # a source tree's own folder first: a checkout imported with PYTHONPATH beside another
+        # checkout's editable install reads its own assets, not the installed one's
+        return _CHECKOUT_ASSETS
     try:
         root = resources.files("simcore.assets")
     except ModuleNotFoundError:

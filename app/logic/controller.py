@@ -27,7 +27,7 @@ from app.logic.attitudes import AttitudeMap
 from app.logic.compare import FrameCompare
 from app.logic.controls import ControlPanel
 from app.logic.flyaround import FlyaroundLogic
-from app.logic.lessons import LessonGuide
+from app.logic.lessons import BY_KEY, LessonGuide
 from app.logic.links import controls_from_link, link_names, link_query
 from app.logic.pacing import FramePacer
 from app.logic.parts import PartHighlight
@@ -132,7 +132,9 @@ class AppLogic:
         server.trigger("export_scene")(self.export_scene)
         server.trigger("open_lesson")(self.open_lesson)
         server.trigger("leave_lesson")(self.lessons.leave)
-        self.physics = PhysicsPage(self.state)  # a card's "Read more" (its own state)
+        # a card's "Read more" and the physics page's sections (their own state)
+        self.physics = PhysicsPage(self.state, texts=BY_KEY)
+        server.trigger("read_more")(self.physics.read_more)
         server.trigger("open_physics")(self.physics.open)
         server.trigger("close_physics")(self.physics.close)
         server.controller.on_server_exited.add(lambda **_: self.runner.close())
@@ -309,6 +311,8 @@ class AppLogic:
         if plan is None:
             return
         self.selection.array_pixels = plan.controls.pixels  # the selection is on its array
+        self.compare.unpin()  # a lesson starts clean: no pinned frame, no highlighted part
+        self.parts.reset()
         generation = self.runner.generation
         with self.state:  # the change handlers submit the new scene, if it is one
             self.state.update(
@@ -531,7 +535,7 @@ class AppLogic:
             "waveforms": waveforms,
             "view_text": waveforms_payload.view_text(frame.result.scene.receiver.kind),
             "snr_hist": frame.snr_histogram,
-            "stats": stats.with_chance_misses(frame.stats, frame.result),
+            "stats": stats.frame_rows(frame.stats, frame.result),
             "quality_rows": [],  # the frame shown has not been scored yet
             "stages": stats.stage_rows(
                 frame.timings_s,

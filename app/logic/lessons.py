@@ -16,6 +16,14 @@ options): a lesson starts from the app's initial controls and sets every control
 With another target (the drop-down, an upload, ``--scene``) a lesson still sets its controls, and
 its card says that its figures are the MRO's.
 
+A lesson starts clean: the views it does not name go to a stated state. The controls and the
+colour modes (``color_by``, ``image_kind``: the record's, default the range), the mode, the
+selection (the record's pixels only), no pinned frame and no highlighted part (the server); the
+array image showing the whole array, or zoomed to the selected pixels where the card is about
+the array image (``card()["zoom"]``), the 3D views at their home cameras, the waveform cursor
+cleared, no outline of an earlier lesson (the page: app/static/lesson.js). A lesson's link,
+``?lesson=KEY``, opens it so.
+
 The parent (``AppLogic``) registers the page's ``open_lesson`` and ``leave_lesson`` triggers and
 calls :meth:`LessonGuide.plan` (what a lesson sets), :meth:`LessonGuide.opened` (the card on the
 page) and :meth:`LessonGuide.leave`. Leaving only hides the card: the scene stays as it is.
@@ -31,6 +39,7 @@ from pathlib import Path
 from typing import Any
 
 from app.logic.links import controls_from_link
+from app.logic.words import linked_html
 from app.state import MAX_SELECTED_PIXELS, Controls, echo
 from simcore._assets import ASSETS_DIR
 
@@ -76,10 +85,14 @@ class Lesson:
     title : the button's and the card's title
     settings : the scene's link settings that differ from ``PAPER_SETTINGS`` (SI units)
     selection : the pixels to select, (row, col) on the lesson's array
-    look, why, try_next : the card's three paragraphs, ``str.format`` templates of ``figures``
-        (a template holds no digit of its own: every number on the card is a figure)
+    basic : the card's text for a reader of 14-16, a template of ``figures`` as the others
+    look, why, try_next : the card's three paragraphs of "More detail", ``str.format``
+        templates of ``figures`` (a template holds no digit of its own: every number on the
+        card is a figure)
     reference : the section that explains it: ``docs/physics.md``, ``#``, one of its anchors
     reference_title : that section's title
+    read_more : the "Read more" text for the app's readers, Markdown with ``$...$`` maths (what
+        the equation says in words, then the equation; app.logic.physics_page draws it)
     figures : the card's numbers, each computed again by the tests
     color_by, image_kind : the display choices (``app.state.COLOR_BY``, ``IMAGE_KINDS``)
     mode, fly_t_s, fly_j2 : single frame, or the fly-around frame at ``fly_t_s`` [s]
@@ -96,6 +109,8 @@ class Lesson:
     try_next: str
     reference: str
     reference_title: str
+    basic: str = ""
+    read_more: str = ""
     figures: Mapping[str, float] = field(default_factory=dict)
     color_by: str = "range"
     image_kind: str = "range"
@@ -113,17 +128,24 @@ class Lesson:
     def card(self, figures: Mapping[str, float] | None = None) -> dict[str, str]:
         """The card's text, with ``figures`` (default: the record's) in its templates."""
         values = self.figures if figures is None else figures
+        texts = {
+            name: getattr(self, name).format_map(values)
+            for name in ("basic", "look", "why", "try_next")
+        }
         return {
             "key": self.key,
             "title": self.title,
-            "look": self.look.format_map(values),
-            "why": self.why.format_map(values),
-            "try_next": self.try_next.format_map(values),
+            **texts,
+            # the same, their glossary words linked (app.logic.words)
+            **{f"{name}_html": linked_html(text) for name, text in texts.items()},
             "reference": self.reference,
             "reference_title": self.reference_title,
             "note": "",
             "view": VIEWS[self.view][0],
             "view_selector": VIEWS[self.view][1],
+            # the array image: zoomed to the lesson's pixels where the card is about it, else
+            # the whole array (app/static/lesson.js)
+            "zoom": "pixels" if self.view == "array" else "whole",
         }
 
 
@@ -132,6 +154,7 @@ class LessonError(ValueError):
 
 
 LESSON_FIELDS = tuple(f.name for f in dataclasses.fields(Lesson))
+TEXT_FIELDS = ("look", "why", "try_next", "basic", "key", "title", "reference", "view", "read_more")
 REQUIRED_FIELDS = tuple(
     f.name
     for f in dataclasses.fields(Lesson)
@@ -155,7 +178,7 @@ def lesson_from_record(record: Mapping[str, Any], source: str = "a lesson") -> L
         for name in ("settings", "figures"):
             if not isinstance(values.get(name, {}), Mapping):
                 raise TypeError(f"{name} is not a table")
-        for name in ("look", "why", "try_next", "key", "title", "reference", "view"):
+        for name in TEXT_FIELDS:
             if not isinstance(values.get(name, ""), str):
                 raise TypeError(f"{name} is not a string")
         figures = values.get("figures", {})
@@ -239,7 +262,12 @@ class LessonGuide:
         self.open_key: str | None = None
         self.state.lesson = None
         self.state.lesson_folded = False  # the card folded to one line (the page decides)
-        self.state.client_only("lesson_folded")
+        self.state.welcome_closed = False  # a first visit's welcome line closed (app.ui.lessons)
+        self.state.lesson_link_copied = ""  # what "Share this lesson" answered
+        self.state.lesson_detail = False  # the card's "More detail" shown
+        self.state.client_only(
+            "lesson_folded", "welcome_closed", "lesson_link_copied", "lesson_detail"
+        )
 
     def plan(self, key: Any, initial: Controls) -> LessonPlan | None:
         """What lesson ``key`` sets, or None with a message on the page if there is no such

@@ -114,11 +114,14 @@ def range_axis(layout: dict, lo_ns: float, hi_ns: float) -> dict:
     }
 
 
-def detection_text(w) -> str:
-    """What became of a pixel's echo this frame: its range, or why it gave no point (a likely
-    echo missed by chance, or one too weak for the threshold)."""
+def detection_text(w, taken_m: float = math.nan) -> str:
+    """What became of a pixel's echo this frame: its range, or why it gave no point (its stop
+    taken by a false alarm at ``taken_m`` [m], app.payloads.stats.taken_by_false_alarm_m; a
+    likely echo missed by chance; or one too weak for the threshold)."""
     if w.detected and math.isfinite(w.range_m):
         return f"R = {w.range_m:.3f} m"
+    if math.isfinite(taken_m):
+        return f"not detected: taken by a false alarm at {taken_m:.1f} m (P_d {w.p_detect:.2f})"
     if w.p_detect >= 0.5:
         return f"not detected: P_d {w.p_detect:.2f}, missed by chance this frame"
     return f"not detected (P_d {w.p_detect:.2f}: too weak for the threshold)"

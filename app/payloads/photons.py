@@ -113,10 +113,70 @@ def photon_figure(result: simcore.Result, selection: list) -> dict:
     layout["yaxis"]["rangemode"] = "tozero"
     data = bars + with_dead + without
     if span:
-        time_axis(layout, min(span), max(span))
-        data.append(range_axis(layout, min(span), max(span)))
+        echo = _echo_span_ns(with_dead, view.bin_s * 1e9)
+        whole = (min(span), max(span))
+        if echo is not None and echo[1] - echo[0] < ZOOM_SHARE * (whole[1] - whole[0]):
+            # opened on the echo, the whole window a click away (a button above the legend)
+            layout["updatemenus"] = [_window_buttons(layout, echo, whole)]
+            whole = echo
+        time_axis(layout, *whole)
+        data.append(range_axis(layout, *whole))
     layout["margin"]["t"] = 10 + 18 * math.ceil(len(bars) * 3 / 2)
     return {"data": data, "layout": layout}
+
+
+ZOOM_SHARE = 0.6  # the chart opens on the echo when it spans less than this of the window
+ECHO_LEVEL = 0.05  # the echo: the bins whose expected counts reach this share of their peak
+ECHO_MARGIN_BINS = 4
+
+
+def _echo_span_ns(expected: list[dict], bin_ns: float) -> tuple[float, float] | None:
+    """The times [ns] of the selected pixels' echoes in the histogram: the bins whose expected
+    counts (dead time included) reach ECHO_LEVEL of their pixel's peak, with a margin; None
+    where no pixel has expected counts."""
+    times: list[float] = []
+    for trace in expected:
+        y = np.asarray(trace["y"], dtype=np.float64)
+        if len(y) and y.max() > 0:
+            x = np.asarray(trace["x"], dtype=np.float64)[y >= ECHO_LEVEL * y.max()]
+            times += [float(x[0]), float(x[-1])]
+    if not times:
+        return None
+    margin = ECHO_MARGIN_BINS * bin_ns
+    return min(times) - margin, max(times) + margin
+
+
+def _window_buttons(layout: dict, echo: tuple[float, float], whole: tuple[float, float]) -> dict:
+    """Two buttons that set the time axis (and its range axis above) to the echo or to the
+    whole window the chart holds."""
+
+    def axes(lo: float, hi: float) -> dict:
+        scratch = {"xaxis": {}}
+        time_axis(scratch, lo, hi)
+        range_axis(scratch, lo, hi)
+        top = scratch["xaxis2"]
+        return {
+            **{f"xaxis.{key}": value for key, value in scratch["xaxis"].items()},
+            "xaxis2.tickvals": top["tickvals"],
+            "xaxis2.ticktext": top["ticktext"],
+        }
+
+    return {
+        "type": "buttons",
+        "direction": "left",
+        "showactive": True,
+        "active": 0,
+        "x": 1.0,
+        "xanchor": "right",
+        "y": 1.0,
+        "yanchor": "top",
+        "pad": {"r": 4, "t": 4},
+        "font": {"size": 10},
+        "buttons": [
+            {"label": "Echo", "method": "relayout", "args": [axes(*echo)]},
+            {"label": "Whole window", "method": "relayout", "args": [axes(*whole)]},
+        ],
+    }
 
 
 def _range_m(t_ns: np.ndarray) -> np.ndarray:

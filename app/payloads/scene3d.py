@@ -298,7 +298,14 @@ def sun_and_earth(scene: simcore.Scene, model: simcore.TargetModel, frame: Displ
         if el < -89.5
         else f"azimuth {az:.0f}°, elevation {el:.0f}°"
     )
-    update["earth_text"] = f"Earth: {altitude_km:,.0f} km {where}"
+    # which altitude: the orbit's at this time, or the one set for a manual Sun (the two differ:
+    # 705 km and 695 km on the paper's orbits)
+    which = (
+        "the target's altitude in its orbit now"
+        if scene.sun.mode == "orbit"
+        else "the target's altitude set for a manual Sun"
+    )
+    update["earth_text"] = f"Earth: {altitude_km:,.0f} km {where}: {which}"
     with_earth = scene.background.earth and scene.background.earth_albedo > 0
     update["lit_side"] = lit_side(
         model,

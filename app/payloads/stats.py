@@ -11,6 +11,7 @@ from app.payloads.charts import base_layout, note, vline
 from app.payloads.encode import si_text
 from app.payloads.style import SNR_FLOOR
 from simcore import receivers
+from simcore.constants import C as C_M_S
 
 
 def stats_rows(summary: dict) -> list[dict]:
@@ -45,17 +46,131 @@ def stats_rows(summary: dict) -> list[dict]:
 
 
 CHANCE_P_D = 0.5  # a pixel missed with at least this P_d was missed by chance, not too weak
+CHANCE_LABEL = f"Missed by chance (P_d ≥ {CHANCE_P_D:g})"
+TAKEN_LABEL = "Taken by a false alarm (its stop used)"
+
+
+def taken_by_false_alarm_m(result: simcore.Result) -> np.ndarray:
+    """(n,) per lit pixel (aligned with ``result.echo.pixel``): the range [m] of the false alarm
+    that took the stop the echo needed, NaN where none did.
+
+    Read from the receiver's own stops (``detection.outliers``: the false alarms each pixel
+    recorded this flash): a linear-mode pixel records at most ``timing.max_stops`` stops and is
+    dead for the re-arm hold-off after each (docs/physics.md#limited-stops), so an echo not
+    detected whose pixel recorded that many false alarms before it, or one less than the
+    hold-off before it, was lost to them; the range given is the latest of them. Other
+    receivers (the Geiger-mode array's histogram) have no such stops: all NaN."""
+    d, echo = result.detection, result.echo
+    n = len(echo.pixel)
+    taken = np.full(n, np.nan)
+    if result.scene.receiver.kind != "lm_apd" or n == 0 or len(d.outliers.pixel) == 0:
+        return taken
+    from simcore.receivers.lm_apd.receiver import stop_holdoff_s  # noqa: PLC0415
+
+    holdoff_m = 0.5 * C_M_S * stop_holdoff_s(result.scene, echo)
+    max_stops = int(result.scene.timing.max_stops)
+    echo_m = np.asarray(d.range_true_m, dtype=np.float64)
+    missed = ~np.asarray(d.detected, dtype=bool) & np.isfinite(echo_m)
+    lit_of = np.full(result.pixels**2, -1, dtype=np.int64)  # flat pixel -> its lit index
+    lit_of[echo.pixel] = np.arange(n)
+    j = lit_of[d.outliers.pixel]  # each false alarm's lit pixel (-1: an unlit one)
+    fa_m = d.outliers.range_m
+    keep = j >= 0
+    keep[keep] = missed[j[keep]] & (fa_m[keep] < echo_m[j[keep]])
+    count = np.bincount(j[keep], minlength=n)
+    latest = np.full(n, -np.inf)
+    np.maximum.at(latest, j[keep], fa_m[keep])
+    lost = (count > 0) & ((count >= max_stops) | (echo_m - latest < holdoff_m))
+    taken[lost] = latest[lost]
+    return taken
 
 
 def with_chance_misses(rows: list[dict], result: simcore.Result) -> list[dict]:
-    """``rows`` with, after the dropped pixels, how many of them had an echo likely to be
-    detected (P_d >= 0.5): missed by chance this frame (the noise pulled them under the
-    threshold; another seed detects most of them), not for want of signal."""
+    """``rows`` with, after the dropped pixels, how many of them lost their echo's stop to an
+    earlier false alarm (:func:`taken_by_false_alarm_m`), and how many others had an echo
+    likely to be detected (P_d >= 0.5): missed by chance this frame (the noise pulled them under
+    the threshold; another seed detects most of them), not for want of signal."""
     d = result.detection
-    chance = int(np.count_nonzero(~np.asarray(d.detected) & (np.asarray(d.p_detect) >= CHANCE_P_D)))
-    row = {"label": f"Missed by chance (P_d ≥ {CHANCE_P_D:g})", "value": f"{chance:,d}"}
+    taken = np.isfinite(taken_by_false_alarm_m(result))
+    chance = ~np.asarray(d.detected) & (np.asarray(d.p_detect) >= CHANCE_P_D) & ~taken
+    added = [
+        {"label": TAKEN_LABEL, "value": f"{int(np.count_nonzero(taken)):,d}"},
+        {"label": CHANCE_LABEL, "value": f"{int(np.count_nonzero(chance)):,d}"},
+    ]
     at = next((i for i, r in enumerate(rows) if r["label"] == "Dropped pixels (missed)"), None)
-    return rows + [row] if at is None else [*rows[: at + 1], row, *rows[at + 1 :]]
+    return rows + added if at is None else [*rows[: at + 1], *added, *rows[at + 1 :]]
+
+
+# a stats row's glossary entry (app.ui.glossary), by the start of its label: its info button
+STAT_TERMS: tuple[tuple[str, str], ...] = (
+    ("Points", "Point cloud"),
+    ("Target points", "Point cloud"),
+    ("Outliers", "Outlier"),
+    ("Dropped pixels", "P_d"),
+    ("Taken by a false alarm", "Stop"),
+    ("Missed by chance", "P_d"),
+    ("Unlit pixels", "Pixel"),
+    ("Pixels seeing the target", "Pixel"),
+    ("Pixels with an echo", "Echo"),
+    ("Mean detection probability", "P_d"),
+    ("Median SNR", "SNR"),
+    ("Median count SNR", "SNR"),
+    ("Median range σ", "σ (sigma)"),
+    ("Median range error", "Range"),
+    ("Sun from the line of sight", "Background light"),
+    ("Sunlit / Earth pixels", "Background light"),
+    ("Median background power", "Background light"),
+    ("Pixels in background light", "Background light"),
+    ("Max background current", "Background light"),
+    ("Background share of noise", "Shot noise"),
+    ("Background light", "Background light"),
+    ("Receiver", "Lidar"),
+)
+
+
+def with_terms(rows: list[dict]) -> list[dict]:
+    """``rows`` with, for a row whose label :data:`STAT_TERMS` knows, its glossary ``term``
+    (the page's info button opens the glossary there; a test checks each has an entry)."""
+    out = []
+    for row in rows:
+        term = next((t for start, t in STAT_TERMS if row["label"].startswith(start)), None)
+        out.append(row if term is None else {**row, "term": term})
+    return out
+
+
+BACKGROUND_LABEL = "Median background power (pixels in light)"
+RANGE_ERROR_LABEL = "Median range error (against the noise-free range)"
+
+
+def frame_rows(rows: list[dict], result: simcore.Result) -> list[dict]:
+    """The stats rows of a frame shown: ``rows`` (:func:`stats_rows` of its summary) with what
+    the frame's arrays add: the dropped pixels' causes (:func:`with_chance_misses`), the
+    median range error beside the median range sigma (the cards quote one or the other: both
+    are shown, each named for what it is), and the background power as the median over the
+    pixels the background lights, with how many they are (a median over every lit pixel read
+    0 W where most of the target was in shade beside a 36.6 nA maximum)."""
+    rows = with_chance_misses(rows, result)
+    d = result.detection
+    hit = np.asarray(d.detected, dtype=bool)
+    error = np.abs(np.asarray(d.range_m) - np.asarray(d.range_true_m))[hit]
+    error_row = {
+        "label": RANGE_ERROR_LABEL,
+        "value": "–" if not len(error) else f"{float(np.median(error)) * 100:.3g} cm",
+    }
+    out = []
+    for row in rows:
+        if row["label"] == "Median background power" and result.background is not None:
+            power = np.asarray(result.background.power_w).ravel()
+            lit = power[power > 0]
+            median = float(np.median(lit)) if len(lit) else 0.0
+            out.append({"label": BACKGROUND_LABEL, "value": si_text(median, "W")})
+            share = f"{len(lit):,d} of {len(power):,d} ({100 * len(lit) / len(power):.0f} %)"
+            out.append({"label": "Pixels in background light", "value": share})
+            continue
+        out.append(row)
+        if row["label"] == "Median range σ":
+            out.append(error_row)
+    return with_terms(out)
 
 
 def _declared(summary: dict) -> receivers.Receiver:

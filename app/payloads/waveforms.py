@@ -9,6 +9,7 @@ import numpy as np
 import simcore
 from app.payloads import encode, photons
 from app.payloads.charts import base_layout, detection_text, note, range_axis, time_axis, vline
+from app.payloads.stats import taken_by_false_alarm_m
 from app.payloads.style import SELECTION_COLORS
 from simcore import receivers
 from simcore.constants import C as C_M_S
@@ -85,9 +86,12 @@ def _chart_xy(t_s: np.ndarray, power_w: np.ndarray, delay_s: float, scale_w: flo
     return t_ns.tolist(), np.round(y, max(digits, 0)).tolist()
 
 
-def _waveform_traces(w: simcore.Waveform, color: str, scale: float) -> list[dict]:
-    """Filtered and raw echo, the delayed emitted pulse and the half-maximum mark of one pixel."""
-    name = f"({w.row}, {w.col}) {detection_text(w)}"
+def _waveform_traces(
+    w: simcore.Waveform, color: str, scale: float, taken_m: float = math.nan
+) -> list[dict]:
+    """Filtered and raw echo, the delayed emitted pulse and the half-maximum mark of one pixel
+    (``taken_m``: the false alarm that took its stop [m], NaN if none)."""
+    name = f"({w.row}, {w.col}) {detection_text(w, taken_m)}"
     group = f"px{w.row}_{w.col}"
     t_ns, filtered = _chart_xy(w.t_s, w.filtered_w, 0.0, scale)
     _, raw = _chart_xy(w.t_s, w.power_w, 0.0, scale)
@@ -157,6 +161,20 @@ def _detected_time_ns(w: simcore.Waveform) -> float | None:
     return (w.t_half_s + 2.0 * (w.range_m - w.range_true_m) / C_M_S) * 1e9
 
 
+def taken_of(result: simcore.Result):
+    """(row, col) -> the range [m] of the false alarm that took the pixel's stop this frame, NaN
+    where none did (app.payloads.stats.taken_by_false_alarm_m)."""
+    taken = taken_by_false_alarm_m(result)
+    index = {int(p): i for i, p in enumerate(result.echo.pixel[np.isfinite(taken)])}
+    values = taken[np.isfinite(taken)]
+
+    def at(row: int, col: int) -> float:
+        i = index.get(int(row) * result.pixels + int(col))
+        return math.nan if i is None else float(values[i])
+
+    return at
+
+
 def waveform_figure(result: simcore.Result, selection: list) -> dict:
     """The plotly figure of the selected pixels' echoes (several pixels overlaid): received power
     vs time since emission, the emitted pulse for reference, the half-maximum marks, the
@@ -166,6 +184,7 @@ def waveform_figure(result: simcore.Result, selection: list) -> dict:
     if chart is not None:
         return chart(result, selection)
     waves = [result.waveform(int(r), int(c)) for r, c in selection]
+    taken = taken_of(result)
     peak = max([float(np.max(w.power_w)) for w in waves if len(w.power_w)] + [0.0])
     threshold_w = waves[0].threshold_w if waves else float("nan")
     scale, prefix = encode.si_prefix(max(peak, threshold_w if math.isfinite(threshold_w) else 0))
@@ -177,7 +196,7 @@ def waveform_figure(result: simcore.Result, selection: list) -> dict:
         if not len(w.t_s):
             data.append(_no_echo_trace(w, color))
             continue
-        data += _waveform_traces(w, color, scale)
+        data += _waveform_traces(w, color, scale, taken(w.row, w.col))
         t_det = _detected_time_ns(w)
         if t_det is not None:
             shapes.append(vline(t_det, color))

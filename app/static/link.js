@@ -1,7 +1,8 @@
 // Shared links (app.logic.links): a page opened with settings in its query string hands them to
 // the server once; ``url`` makes the link of the current settings, with this page's token. A
 // session's page (/s/<id>/..., app.server.launcher) links to the launcher's root, so that whoever
-// opens the link gets a session of their own with the same scene; it is given the token after "#"
+// opens the link gets a session of their own with the same scene (``?lesson=KEY``: the lesson,
+// its card, views and selection); it is given the token after "#"
 // (never sent to a server). Once read, the token, the settings and the session's id leave the
 // address bar (the page shows "/", whose reload opens a new session): a projected address gives
 // nothing away. When the connection closes for good (the session ended), the page says so.
@@ -29,8 +30,14 @@
     },
   };
   query.delete('token');
+  const lesson = query.get('lesson');  // a lesson's link (its card's "Share this lesson")
+  query.delete('lesson');
   const given = Object.fromEntries(query);
-  if (Object.keys(given).length) window.trame.trigger('open_link', [given]);
+  if (lesson) window.trame.trigger('open_lesson', [lesson]);
+  else if (Object.keys(given).length) window.trame.trigger('open_link', [given]);
+  let welcomed = true;  // a first visit in this browser gets the welcome line (app.ui.lessons)
+  try { welcomed = window.localStorage.getItem('lmapd-welcomed') === '1'; } catch (e) { /* */ }
+  window.trame.utils.lmapdWelcome = !welcomed && !lesson;  // read as the page mounts
   window.history.replaceState(null, document.title, root);
   const client = window.trame.state && window.trame.state.client;
   if (client && client.onConnectionClose) {

@@ -42,6 +42,62 @@ _GENERAL_GLOSSARY: dict[str, str] = {
     "same points.",
     "Fidelity": "How finely the rays sample each pixel (sub-rays) and how the noise is modelled: "
     "finer is truer and slower.",
+    # the words of the lessons' cards, for a reader of 14-16 (every one a card uses links here)
+    "Lidar": "Light detection and ranging: a laser sends a short flash and a timer measures how "
+    "long its light takes to come back, which gives the distance.",
+    "Echo": "The light of the laser flash that a surface sends back, as a pixel records it over "
+    "time (on the waveform chart).",
+    "Threshold": "The level a pixel's signal must cross for the pixel to decide that an echo "
+    "has arrived and give a point (dash-dot on the waveform chart).",
+    "Noise": "The random wobble of a signal that is there even with no light at all: it comes "
+    "from the detector, its electronics and the light itself.",
+    "σ (sigma)": "The typical size of a random wobble (its standard deviation): about two "
+    "thirds of the time the noise is within ±σ.",
+    "Shot noise": "Light arrives as separate photons at random moments, so even steady light "
+    "flickers; the more light, the larger the flicker (it grows as the square root of the "
+    "light).",
+    "Rice's rate": "How often noise alone crosses a threshold upwards, per second. It falls "
+    "very fast as the threshold rises, as exp(−TNR²/2) (worked out by S. O. Rice in 1944).",
+    "False alarm": "Noise alone crossing the threshold: the pixel gives a point where there is "
+    "nothing (an outlier, red in the point cloud).",
+    "Stop": "The pixel's timer stops at the first crossing of the threshold: it records one "
+    "time per flash (one stop), so a false alarm before the echo takes the echo's place.",
+    "Range gate": "The stretch of distances in which the pixels listen for echoes after each "
+    "flash.",
+    "BRDF": "Bidirectional reflectance distribution function: how much light a material sends "
+    "back in each direction; for a lidar, how bright a surface looks at each angle.",
+    "Reflectance": "How much of the light falling on a surface it sends back towards the lidar "
+    "(per unit of solid angle, in 1/sr).",
+    "Specular": "Mirror-like reflection: strong in one direction only (a shiny surface).",
+    "Diffuse": "Matte reflection, as from paper: the light goes out in every direction.",
+    "Normal": "The direction straight out of a surface; the angle from it says how tilted the "
+    "surface is seen.",
+    "Grazing incidence": "Seeing a surface almost edge-on, close to 90° from its normal: it "
+    "shows almost no area and sends almost nothing back.",
+    "AC-coupled": "An electronic input that passes changes and blocks a steady level: the "
+    "steady background is removed, but its flicker (shot noise) stays.",
+    "Photon": "A single particle of light. A laser flash of 1 mJ at 1064 nm holds about 5 × "
+    "10¹⁵ of them.",
+    "Photoelectron": "An electron freed by one photon in the detector: the detector counts the "
+    "light it catches in photoelectrons.",
+    "Coates' correction": "A correction of Geiger-mode counts: each pulse records only its "
+    "earliest photon, so later time bins are under-counted; Coates (1968) showed how to undo "
+    "this from the counts themselves.",
+    "Geiger mode": "A detector so sensitive that a single photon sets off an avalanche of "
+    "current; it counts photons over many pulses.",
+    "Linear mode": "A detector whose output grows in proportion to the light: it measures the "
+    "echo's strength in one flash.",
+    "Histogram": "A bar chart of counts: here, how many photons arrived in each short time bin.",
+    "Field of view": "The angle the camera sees, shared by its pixels.",
+    "Fly-around": "The lidar's orbit carries it around the target: a picture every few minutes, "
+    "each from a new side.",
+    "Point cloud": "The 3D points the lidar measured: at most one per pixel per flash.",
+    "Median": "The middle value: half of the values are above it, half below.",
+    "Band-limited": "The electronics cannot follow very fast changes, so the recorded pulse is "
+    "a little smoothed and widened.",
+    "Irradiance": "The light power falling on each square metre [W/m²].",
+    "Solid angle": "How large something looks from a point, as the area it covers on a sphere "
+    "of radius 1 around that point [sr, steradian].",
 }
 
 # each control's entries, first the one it sets
@@ -104,6 +160,13 @@ CONTROL_TERMS: Mapping[str, tuple[str, ...]] = _Merged(
 )
 
 
+def js_text(text: str) -> str:
+    """``text`` as a JavaScript string in single quotes, for an expression in one of the page's
+    attributes (which are in double quotes): "Rice's rate" -> 'Rice\\'s rate'."""
+    escaped = text.replace("\\", "\\\\").replace("'", "\\'").replace('"', "\\x22")
+    return f"'{escaped}'"
+
+
 def control_text(key: str) -> str:
     """The glossary entries of control ``key``, one paragraph each."""
     return "\n\n".join(f"{term}: {GLOSSARY[term]}" for term in CONTROL_TERMS[key])
@@ -124,7 +187,7 @@ def info_button(key: str, name: str) -> None:
                 density="compact",
                 variant="text",
                 color="primary",
-                click=f"glossary_term = '{CONTROL_TERMS[key][0]}'; glossary_open = true",
+                click=f"glossary_term = {js_text(CONTROL_TERMS[key][0])}; glossary_open = true",
                 classes=f"info-button info-{key}",
                 **html_attributes(aria_label=f"What is {name}?"),
             )
@@ -163,14 +226,30 @@ def glossary_dialog() -> None:
                     **html_attributes(aria_label="Close the glossary"),
                 )
             with v3.VCardText():
+                with html.P(classes="text-caption mb-2 teaching-guide"):
+                    html.Span("For teachers: ")
+                    html.A(
+                        "the teacher's guide",
+                        v_if="teaching_url",
+                        href=("teaching_url",),
+                        target="_blank",
+                        rel="noopener",
+                    )
+                    html.Span("the teacher's guide (docs/teaching.md)", v_else=True)
+                    html.Span(
+                        " gives each lesson's learning goal, questions to ask, what students "
+                        "get wrong and how long it takes, and how to run a class with one link "
+                        "per lesson."
+                    )
                 with html.Dl(classes="glossary-list"):
                     for term, text in GLOSSARY.items():
+                        quoted = js_text(term)
                         with html.Div(
                             classes=(
-                                f"['glossary-entry', glossary_term === '{term}' ? "
+                                f"['glossary-entry', glossary_term === {quoted} ? "
                                 "'glossary-asked' : '']",
                             ),
-                            style=(f"{{ order: glossary_term === '{term}' ? -1 : 0 }}",),
+                            style=(f"{{ order: glossary_term === {quoted} ? -1 : 0 }}",),
                         ):
                             html.Dt(term, classes="glossary-term")
                             html.Dd(text, classes="glossary-text")

@@ -25,9 +25,13 @@ def app_bar() -> None:
         )
         with v3.VToolbarTitle(classes="text-white"):
             html.Span("lmapd-sim", classes="app-title")
-            html.Span(
+            html.Span(  # the full line where it fits, the target's name alone where not
                 " · live LM-APD flash-lidar imaging of {{ target_name }}",
-                classes="text-body-2 d-none d-md-inline",
+                classes="text-body-2 d-none d-xl-inline app-subtitle",
+            )
+            html.Span(
+                " · {{ target_name }}",
+                classes="text-body-2 d-none d-md-inline d-xl-none app-subtitle-short",
             )
         v3.VSpacer()
         glossary.glossary_button()

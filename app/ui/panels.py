@@ -178,7 +178,7 @@ def array_card() -> None:
                     v_show="array_image.png",
                     classes="array-image",
                     draggable="false",
-                    alt="detector array image",
+                    alt=(ARRAY_DESCRIPTION,),
                     click=PIXEL_CLICK,
                     mousemove=PIXEL_HOVER,
                     mouseleave=HOVER_END,
@@ -226,7 +226,18 @@ CURSOR_CLICK = "wave_cursor = trame.utils.lmapdCursor.click($event)"
 
 
 def waveform_card() -> None:
-    with v3.VCard(classes="view-card waveform-card", elevation=1):
+    with v3.VCard(
+        classes="view-card waveform-card",
+        elevation=1,
+        **html_attributes(aria_describedby="waveform-description"),
+    ):
+        html.P(  # the chart's traces in words: each selected pixel's echo and what became of it
+            "{{ view_text.waveform_title + ': ' + (((waveforms || {}).data || []).filter((t) =>"
+            " t.showlegend !== false && t.name && t.name.startsWith('(')).map((t) => t.name)"
+            ".join('; ') || 'no pixel selected') + '.' }}",
+            id="waveform-description",
+            classes="sr-only",
+        )
         with v3.VCardTitle(classes="card-title"):
             html.Span("{{ view_text.waveform_title }}")
         html.Div("{{ view_text.waveform_caption }}", classes="hint text-caption px-4")
@@ -257,11 +268,29 @@ def waveform_card() -> None:
             )
 
 
-def _table(rows: str, key: str, label: str, value: str, value_class: str) -> None:
+def _table(
+    rows: str, key: str, label: str, value: str, value_class: str, info: bool = False
+) -> None:
+    """A table of ``rows``; ``info``: a row with a glossary term (``row.term``) has an info
+    button that opens the glossary there."""
     with v3.VTable(density="compact", classes="stats-table"):
         with html.Tbody():
             with html.Tr(v_for=f"row in {rows}", key=key):
-                html.Td(label)
+                with html.Td():
+                    html.Span(label)
+                    if info:
+                        v3.VBtn(
+                            v_if="row.term",
+                            icon="mdi-information-outline",
+                            size="x-small",
+                            density="compact",
+                            variant="text",
+                            color="primary",
+                            title=("'What is ' + row.term + '? (the glossary)'",),
+                            click="glossary_term = row.term; glossary_open = true",
+                            classes="info-button stats-info ml-1",
+                            **html_attributes(aria_label=("'What is ' + row.term + '?'",)),
+                        )
                 html.Td(value, classes=value_class)
 
 
@@ -287,8 +316,40 @@ def quality_block() -> None:
             _table("quality_rows", "row.label", "{{ row.label }}", "{{ row.value }}", "stat-value")
 
 
+# What a screen reader reads of the stats card and the array image, from each frame's figures
+STATS_KEY_ROWS = (
+    "Points",
+    "Target points",
+    "Outliers (false alarms)",
+    "Dropped pixels (missed)",
+    "Pixels with an echo (lit)",
+)
+STATS_DESCRIPTION = (
+    "'Statistics of this flash: ' + (stats || []).filter((r) => "
+    + repr(list(STATS_KEY_ROWS)).replace('"', "'")
+    + ".includes(r.label)).map((r) => r.label + ' ' + r.value).join(', ') + '.'"
+)
+ARRAY_DESCRIPTION = (
+    "'Detector array image, ' + array_image.pixels + ' by ' + array_image.pixels + ' pixels, "
+    "showing ' + ({ range: 'the range', peak_power: 'the peak power', background: 'the "
+    "background light', multi_peak: 'the pixels with two peaks' })[image_kind] + ', with ' + "
+    "n_points.toLocaleString() + ' points; selected: ' + (selected_pixels.length ? "
+    "selected_pixels.map((p) => 'row ' + p[0] + ' column ' + p[1]).join(', ') : 'none') + '.'"
+)
+
+
 def stats_card() -> None:
-    with v3.VCard(classes="view-card stats-card", elevation=1):
+    with v3.VCard(
+        classes="view-card stats-card",
+        elevation=1,
+        **html_attributes(aria_describedby="stats-description"),
+    ):
+        html.P(
+            (f"{{{{ {STATS_DESCRIPTION} }}}}"),
+            id="stats-description",
+            classes="sr-only",
+            **html_attributes(aria_live="polite"),
+        )
         with v3.VCardTitle(classes="card-title d-flex align-center flex-wrap ga-2"):
             html.Span("Statistics of this flash")
             v3.VSpacer()
@@ -296,7 +357,9 @@ def stats_card() -> None:
         compare.compare_table()
         with html.Div(classes="stats-grid"):  # side by side where the card is wide enough
             with html.Div():
-                _table("stats", "row.label", "{{ row.label }}", "{{ row.value }}", "stat-value")
+                _table(
+                    "stats", "row.label", "{{ row.label }}", "{{ row.value }}", "stat-value", True
+                )
             with html.Div():
                 html.Div("Time per stage (ms)", classes="subtitle text-caption px-2")
                 _table(

@@ -22,6 +22,7 @@ from trame.widgets import vuetify3 as v3
 from app.payloads import encode
 from app.payloads.scene3d import EARTH_COLOR, SUN_COLOR
 from app.payloads.style import HIDDEN_COLOR
+from app.ui.widgets import html_attributes
 
 BACKGROUND = "[0.102, 0.110, 0.137]"  # #1a1c23
 BACKGROUND_RGB = (26, 28, 35)
@@ -86,8 +87,20 @@ def _lit_switch() -> None:
 
 def scene_card() -> None:
     """Target mesh, frustum, material legend, the lit side and the model credit."""
-    with v3.VCard(classes="view-card scene-card", elevation=1) as card:
+    with v3.VCard(
+        classes="view-card scene-card",
+        elevation=1,
+        **html_attributes(aria_describedby="scene-description"),
+    ) as card:
         card.server.state.client_only("show_lit_side")
+        html.P(  # what a screen reader reads of the view, from each frame's figures
+            "{{ 'The 3D scene: ' + target_name + ' at ' + Math.round(distance_m) + ' m, pitch '"
+            " + pitch_deg + '°, azimuth ' + azimuth_deg + '°, with the lidar\\'s field of view'"
+            " + (footprint_text ? ' (' + footprint_text + ')' : '') + '. ' + (sun_text || '')"
+            " + ' ' + (earth_text || '') }}",
+            id="scene-description",
+            classes="sr-only",
+        )
         with v3.VCardTitle(classes="card-title d-flex align-center flex-wrap"):
             html.Span("3D scene: target and field of view")
             v3.VSpacer()
@@ -187,7 +200,18 @@ def _material_legend() -> None:
 
 def cloud_card() -> None:
     """The point cloud with its colour bar (or the outlier legend)."""
-    with v3.VCard(classes="view-card cloud-card", elevation=1):
+    with v3.VCard(
+        classes="view-card cloud-card",
+        elevation=1,
+        **html_attributes(aria_describedby="cloud-description"),
+    ):
+        html.P(
+            "{{ 'The point cloud: ' + n_target_points.toLocaleString() + ' target points and '"
+            " + n_outliers.toLocaleString() + ' outliers (false alarms), coloured by ' + color_by"
+            " + '.' }}",
+            id="cloud-description",
+            classes="sr-only",
+        )
         _card_title("Point cloud (target-fixed frame, m)", "cloud_view")
         with html.Div(classes="vtk-box cloud-box"):
             with _view("cloud_view"):

@@ -6,6 +6,7 @@ runs; random combinations leave no traceback in the log."""
 from __future__ import annotations
 
 import logging
+import re
 
 import numpy as np
 import pytest
@@ -35,6 +36,10 @@ def test_a_frame_over_the_budget_is_refused_and_the_sliders_return(app, caplog):
         change(app, gm_dark_count_rate_hz=1e8, gm_pulses=1000)
     message = app.state.error_message
     assert message.startswith("Refused: this frame would record about")
+    # the figure refused and the limit are written alike: two digits, in full
+    figures = re.search(r"about ([\d,.]+) .* at most ([\d,.]+) per frame", message)
+    assert figures is not None, message
+    assert all(re.fullmatch(r"\d{1,3}(,\d{3})*", f) for f in figures.groups()), figures.groups()
     assert "Pulses per frame" in message and "Dark count rate" in message
     assert "timing." not in message and "gm." not in message
     assert "back to the values of the frame shown" in message

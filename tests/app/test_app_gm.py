@@ -105,6 +105,19 @@ def test_the_default_geiger_mode_chart_shows_the_measured_counts_at_their_scale(
         xaxis = figure["layout"]["xaxis"]
         assert xaxis["tickformat"].startswith(",.") and xaxis["dtick"] > 0
         assert figure["layout"]["xaxis2"]["ticktext"][0].endswith(" m")
+        # opened on the echo: every bin with a tenth of the peak's counts in view, the whole
+        # window (every bar) a click away
+        lo, hi = xaxis["range"]
+        peak_x = [x for x, y in zip(bars["x"], bars["y"], strict=True) if y >= max(bars["y"]) / 10]
+        assert lo <= min(peak_x) and max(peak_x) <= hi
+        menu = figure["layout"]["updatemenus"][0]["buttons"]
+        assert [b["label"] for b in menu] == ["Echo", "Whole window"]
+        whole_lo, whole_hi = menu[1]["args"][0]["xaxis.range"]
+        assert whole_lo <= min(bars["x"]) and max(bars["x"]) <= whole_hi
+        assert hi - lo < 0.6 * (whole_hi - whole_lo) and menu[0]["args"][0]["xaxis.range"] == [
+            lo,
+            hi,
+        ]
     assert own_axis  # unattenuated, the brightest pixel piles up
     assert "Photon counts" in app.state.view_text["waveform_title"]
     assert "dead time" in app.state.view_text["waveform_caption"]

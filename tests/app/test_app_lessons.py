@@ -414,6 +414,12 @@ def figures_lm_vs_gm(app, pipeline, result) -> dict:
 
     d = result.detection
     assert np.median((d.range_m - d.range_true_m)[d.detected]) < 0  # early: the onset
+    # the card: the error, as the stats name it, exceeds the median range sigma beside it
+    rows = {row["label"]: row["value"] for row in app.state.stats}
+    assert rows["Median range error (against the noise-free range)"] == (
+        f"{range_error_m(result) * 100:.3g} cm"
+    )
+    assert range_error_m(result) > summary(result, "range_sigma_m_median")
     return {
         "d": result.scene.pose.distance_m,
         "energy_mj": energy_mj(lesson),
@@ -502,7 +508,8 @@ def test_every_number_on_a_card_is_one_of_its_figures():
     """No digit in a template outside a placeholder (but the equations' and tables' numbers),
     and every figure is used."""
     for lesson in LESSONS:
-        text = lesson.look + lesson.why + lesson.try_next
+        assert lesson.basic, lesson.key  # every card has its text for a reader of 14-16
+        text = lesson.basic + lesson.look + lesson.why + lesson.try_next
         fields = set(re.findall(r"\{(\w+)", text))
         assert fields == set(lesson.figures), lesson.key
         words = re.sub(r"\{[^}]*\}|Eqs?\. \d+(-\d+)?|Table \d+", "", text)

@@ -26,7 +26,7 @@ def test_a_manual_sun_lights_the_target_without_a_new_ray_cast(app):
     assert frame.result.scene.sun.mode == "manual" and frame.result.scene.sun.azimuth_deg == 20
     assert frame.timings_s["hits"] == 0.0 and frame.timings_s["background"] > 0  # cached rays
     assert frame.result.background.power_w.max() > 0
-    assert stat(app, "Median background power").endswith("W")
+    assert stat(app, "Median background power (pixels in light)").endswith("W")
     assert "%" in stat(app, "Background share of noise var.")
     power = frame.result.background.power_w
     row, col = (int(i) for i in np.unravel_index(np.argmax(power), power.shape))

@@ -43,6 +43,10 @@ def open_from_the_panel(page, key: str) -> None:
     wait_settled(page)
 
 
+def shown_basic(lesson) -> str:
+    return lesson.card()["basic"]
+
+
 def test_a_lesson_opens_with_its_card_and_its_selected_pixels(page, lessons_url, artifacts_dir):
     page.goto(lessons_url)
     wait_first_frame(page)
@@ -52,10 +56,14 @@ def test_a_lesson_opens_with_its_card_and_its_selected_pixels(page, lessons_url,
     open_from_the_panel(page, lesson.key)
     card = page.get_by_role("region", name="Lesson")
     assert card.is_visible()
+    if state(page, "lesson_folded"):
+        page.locator(".fold-lesson").click()
+    assert shown_basic(lesson) in card.inner_text()  # the reader's text first
+    page.locator(".lesson-detail-button").click()  # then "More detail"
     text = card.inner_text()
     shown = lesson.card()
     assert f"Lesson: {lesson.title}" in text
-    for part in ("look", "why", "try_next", "reference"):
+    for part in ("look", "why", "try_next", "reference_title"):
         assert shown[part] in text, part
     selection = [list(p) for p in lesson.selection]
     assert state(page, "selected_pixels") == selection

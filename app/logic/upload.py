@@ -49,6 +49,10 @@ log = logging.getLogger(__name__)
 ALLOWED_SUFFIXES = (".glb", ".gltf", ".obj", ".stl", ".ply")
 MAX_UPLOAD_BYTES = 32 * 2**20  # 32 MiB per file
 MAX_UPLOAD_FACES = 1_000_000  # triangles per uploaded target
+MAX_UPLOAD_VERTICES = 3 * MAX_UPLOAD_FACES  # vertices per uploaded target (unshared corners)
+# scalar values a glTF upload's accessors may declare together: a million triangles with their
+# positions, normals and texture coordinates (3 + 9 + 9 + 6 M) and margin
+MAX_UPLOAD_VALUES = 40_000_000
 SCALE_RANGE = (1e-6, 1e4)  # metres per mesh unit
 DEFAULT_SCALE = 1.0
 
@@ -113,8 +117,15 @@ def self_contained_glb(data: bytes, suffix: str) -> tuple[bytes, int]:
     """Parse a mesh file from its bytes alone and re-encode it as one binary glTF (parts kept as
     its geometries); also return its triangle count. Raises UploadError for files that cannot
     be read, hold no triangles, too many, or non-finite vertices."""
-    try:  # NaN or infinite vertices are refused here, in every format (the core's check)
-        loaded = load_mesh_file(io.BytesIO(data), file_type=suffix[1:], resolver=None)
+    try:  # declared counts over the limits, and NaN or infinite vertices, refused (the core's)
+        loaded = load_mesh_file(
+            io.BytesIO(data),
+            file_type=suffix[1:],
+            max_faces=MAX_UPLOAD_FACES,
+            max_vertices=MAX_UPLOAD_VERTICES,
+            max_values=MAX_UPLOAD_VALUES,
+            resolver=None,
+        )
     except TargetError as exc:
         raise UploadError(str(exc)) from None
     except Exception as exc:  # trimesh raises many types for malformed files

@@ -96,6 +96,7 @@ class LmapdApp:
             limits=limits,
             origins=origins,
         )
+        self.guard.sync.refusals.update(self.uploads.refusals())
         self.server.start(
             host=host, port=port, open_browser=False, timeout=0, show_connection_info=False
         )

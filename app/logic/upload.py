@@ -87,6 +87,8 @@ def upload_content(value: Any) -> tuple[bytes, str]:
     content = value.get("content")
     if isinstance(content, memoryview | bytearray):
         content = bytes(content)
+    if isinstance(content, str):
+        raise UploadError("the file's content came as text, not as the file's bytes")
     if not isinstance(content, bytes):
         error = value.get("error")
         why = f": {echo(error)}" if error else ""
@@ -321,8 +323,8 @@ class TargetUploads:
 
     # -- handlers (event loop) --------------------------------------------------------------------
     def on_upload(self, upload_file: Any = None, **_: Any) -> None:
-        if not upload_file:  # None, or an empty selection (the input was cleared)
-            return
+        if upload_file is None or (isinstance(upload_file, list) and not upload_file):
+            return  # nothing, or an empty selection (the input was cleared)
         # drop the bytes from the shared state at once, and empty the input: the same file can
         # be picked again (after a refusal, or with another scale)
         self.state.upload_file = None
@@ -345,6 +347,28 @@ class TargetUploads:
                 raise
 
         self._start(work)
+
+    def refusals(self) -> dict[str, Callable[[Any], None]]:
+        """What the page is told of an upload value refused before it reached the state (a
+        list of files, a scale that is a list): state key -> called with the refused value."""
+
+        def refused_file(value: Any) -> None:
+            try:
+                upload_content(value)
+                text = f"not a file upload ({echo(value)})"
+            except UploadError as exc:
+                text = str(exc)
+            self._fail(f"{upload_name(value)}: {text}")
+
+        def refused_scale(value: Any) -> None:
+            try:
+                scale_value(value)
+                text = f"scale {echo(value)} is not a number"
+            except UploadError as exc:
+                text = str(exc)
+            self.state.upload_error = f"{text}; kept the previous scale"
+
+        return {"upload_file": refused_file, "upload_scale": refused_scale}
 
     def on_scale(self, upload_scale: Any = None, **_: Any) -> None:
         try:

@@ -18,7 +18,8 @@ last:
 and ``clear_state_client_cache`` of trame's protocol instance, see ``attach``):
 
 * a client may write only the keys the app declares for it, each value through its screen;
-  anything else is dropped and logged, never stored or forwarded;
+  anything else is dropped and logged, never stored or forwarded (a key with a refusal hook,
+  such as an upload's, also tells the page why: ``refusals``);
 * each page has its own record of what it was sent; a value reaches a page only if it differs
   from that record, and only once the change callbacks have run (a value the controls' validators
   correct is never forwarded raw, and an upload's bytes never leave the server);
@@ -65,6 +66,9 @@ class ClientStateSync:
         # page -> client key -> values pushed to it since it last sent that key (the newest few)
         self._pushed: dict[str, dict[str, list[bytes]]] = {}
         self._held: set[str] = set()  # keys of a client update being applied
+        # key -> called with a client's value its screen refused, to tell the page why (a value
+        # of no other key is only logged)
+        self.refusals: dict[str, Callable[[Any], None]] = {}
         self.n_dropped = 0
         self.n_echoes = 0
 
@@ -140,6 +144,9 @@ class ClientStateSync:
             except (ValueError, TypeError, OverflowError) as exc:
                 self.n_dropped += 1
                 log.warning("dropped state %s from a client: %s", echo(key), str(exc)[:200])
+                if key in self.refusals:
+                    with self.state:  # sent now (a state.update alone waits for a flush)
+                        self.refusals[key](raw)
                 continue
             sent[key] = packed  # what the page holds now
             if packed in pushed.get(key, ()):

@@ -56,7 +56,7 @@ from collections.abc import Callable
 import aiohttp
 from aiohttp import web
 
-from app.server import connections, pages, proxy, routes, security
+from app.server import connections, headers, pages, proxy, routes, security
 from app.server.caps import FORKED_SESSION_BYTES as FORKED_SESSION_BYTES
 from app.server.caps import MAX_DEFAULT_SESSIONS as MAX_DEFAULT_SESSIONS
 from app.server.caps import MEMORY_SHARE as MEMORY_SHARE
@@ -129,6 +129,7 @@ class Launcher:
     def web_app(self) -> web.Application:
         web_app = web.Application(client_max_size=64 * 1024, middlewares=[self.guard.middleware])
         web_app.router.add_route("*", "/{tail:.*}", self.handle)
+        headers.install(web_app)  # CSP, nosniff, no referrer, no-store pages (proxied ones too)
         web_app.on_startup.append(self._on_startup)
         web_app.on_cleanup.append(self._on_cleanup)
         return web_app
@@ -189,6 +190,11 @@ class Launcher:
             self.n_not_navigation += 1
             self.log.warning("navigation", "no session for %s: %s", request.remote, problem)
             return pages.not_a_tab(routes.root_link(request))
+        problem = None if token_cookie else routes.foreign_navigation(request.headers)
+        if problem is not None:  # the cookie alone: only from the app's own pages
+            self.n_not_navigation += 1
+            self.log.warning("navigation", "no session for %s: %s", request.remote, problem)
+            return pages.not_from_here(routes.root_link(request))
         client = request.cookies.get(routes.client_cookie(request), "")
         if not routes.CLIENT_ID.match(client):
             client = secrets.token_urlsafe(16)
@@ -216,6 +222,7 @@ class Launcher:
         )
         if token_cookie:
             page.set_cookie(token_cookie, self.token, httponly=True, samesite="Strict")
+        nonce = headers.new_nonce(request)  # the page's one script, in the headers sent now
         self.n_starting += 1
         try:
             ahead = self.n_starting - 1
@@ -238,7 +245,7 @@ class Launcher:
         log.info("session %s: process %d on port %d", session_id[:6], child.pid, child.port)
         settings = [(k, v) for k, v in request.query.items() if k != "token"]
         target = f"/s/{session_id}/" + ("?" + routes.query_string(settings) if settings else "")
-        if not await finish(page, move_html(f"{target}#token={routes.quoted(self.token)}")):
+        if not await finish(page, move_html(f"{target}#token={routes.quoted(self.token)}", nonce)):
             await self.end_session(session_id, "its tab closed before the session started")
         return page
 

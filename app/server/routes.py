@@ -32,6 +32,18 @@ def navigation_problem(headers) -> str | None:
     return None
 
 
+def foreign_navigation(headers) -> str | None:
+    """None if a navigation to the door that carries the token only in its cookie comes from
+    the app's own pages or from the browser itself (``Sec-Fetch-Site: same-origin`` or
+    ``none``: the address bar, a bookmark; or no fetch metadata at all), else why not. A page on
+    another port of this machine is same-site: its navigation carries the cookie (cookies ignore
+    ports), and must not start a session."""
+    site = headers.get("Sec-Fetch-Site", "").lower()
+    if site and site not in ("same-origin", "none"):
+        return f"a navigation from a {security.echo(site)} page without the token in its address"
+    return None
+
+
 def session_cookie(session_id: str) -> str:
     """The name of the cookie that binds a session to its browser."""
     return f"lmapd-session-{session_id}"

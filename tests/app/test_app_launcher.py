@@ -286,6 +286,63 @@ def test_only_a_tabs_navigation_starts_a_session(headers):
     run(body)
 
 
+@pytest.mark.parametrize(
+    ("site", "token_in_address", "starts"),
+    [
+        ("same-site", False, False),  # a page on another port of 127.0.0.1 (cookies ignore ports)
+        ("cross-site", False, False),
+        ("same-site", True, True),  # whoever holds the printed address may start one
+        ("same-origin", False, True),  # a link of the app's own pages
+        ("none", False, True),  # the address bar, a bookmark, a reload
+        (None, False, True),  # a client that sends no fetch metadata
+    ],
+)
+def test_the_token_cookie_alone_starts_a_session_only_from_the_apps_own_pages(
+    site, token_in_address, starts
+):
+    async def body():
+        async with serving(caps(spare=False)) as (launcher, base, client):
+            headers = {**NAVIGATION, **({"Sec-Fetch-Site": site} if site else {})}
+            if not token_in_address:
+                headers.update(cookie(base))
+            url = f"{base}/?token={TOKEN}" if token_in_address else f"{base}/?pixels=32"
+            async with client.get(url, allow_redirects=False, headers=headers) as answer:
+                text = await answer.text()
+                status = answer.status
+            await until(lambda: launcher.n_starting == 0, "the door to finish")
+            return status, text, len(launcher.sessions)
+
+    status, text, n_sessions = run(body)
+    if starts:
+        assert (status, n_sessions) == (200, 1) and "/s/" in text
+    else:
+        assert (status, n_sessions) == (403, 0) and "/s/" not in text
+        assert "Open the address that lmapd app printed" in text and "href='/?pixels=32'" in text
+
+
+def test_every_answer_carries_the_security_headers_and_the_doors_script_its_nonce():
+    async def body():
+        async with serving(caps(spare=False)) as (_, base, client):
+            url = f"{base}/?token={TOKEN}"
+            async with client.get(url, allow_redirects=False, headers=NAVIGATION) as answer:
+                door, page = dict(answer.headers), await answer.text()
+            refused = (await get(client, f"{base}/?token=wrong"))[2]
+            missing = (await get(client, f"{base}/s/nope/", **cookie(base)))[2]
+            return door, page, refused, missing
+
+    door, page, refused, missing = run(body)
+    nonce = re.search(r"<script nonce='([^']+)'>window\.location\.replace", page)[1]
+    policy = door["Content-Security-Policy"]
+    assert f"'nonce-{nonce}'" in policy.split("; ")[1]  # script-src
+    assert "frame-ancestors 'none'" in policy and "connect-src 'self' ws://127.0.0.1:" in policy
+    assert door["Cache-Control"] == "no-store"
+    for headers in (door, refused, missing):
+        assert headers["X-Content-Type-Options"] == "nosniff"
+        assert headers["Referrer-Policy"] == "no-referrer" and headers["X-Frame-Options"] == "DENY"
+        assert "default-src 'self'" in headers["Content-Security-Policy"]
+    assert "nonce" not in refused["Content-Security-Policy"]  # a nonce only where it is used
+
+
 def test_an_unknown_session_or_a_path_out_of_it_gets_a_page_not_a_trace():
     async def body():
         async with serving(caps()) as (_, base, client):

@@ -22,10 +22,12 @@ from __future__ import annotations
 
 import ctypes
 import gc
+import logging
 import os
 import signal
 import sys
 
+from app.server import connections
 from app.server.children import ZYGOTE_READY as READY
 from app.server.children import say
 from app.server.children import token_digest as digest
@@ -77,6 +79,10 @@ def main(argv: list[str] | None = None) -> int:
     args = app_main.parse_args(
         ["--shared", "--token-stdin", "--host", "127.0.0.1", "--port", "0", *options]
     )
+    # the sessions' logs as the launcher's: one short line per refusal or malformed request,
+    # never the request line (it may carry a token) nor a traceback
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    connections.shorten_server_logs()
     import simcore  # noqa: PLC0415
     from app.engine import Engine  # noqa: PLC0415
 

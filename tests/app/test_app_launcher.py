@@ -934,3 +934,71 @@ def test_processes_sharing_a_pipe_print_whole_lines():
     broken = [line for line in lines if not whole.match(line)]
     assert not broken, broken[:3]
     assert len(lines) == n_procs * n_lines
+
+
+MALFORMED = [  # each sent alone on a fresh connection, the launcher's token in its request line
+    "GET /?token={t} HTTP/1.1\r\nHost: x\r\nContent-Length: nope\r\n\r\n",
+    "GET /?token={t}\x01 HTTP/1.1\r\nHost: x\r\n\r\n",
+    "GET /?token={t} HTTP/1.1\r\nHost: x\r\nBad Header\r\n\r\n",
+    "G@T /?token={t} HTTP/1.1\r\nHost: x\r\n\r\n",
+    "GET /?token={t} HTTP/9.9\r\nHost: x\r\n\r\n",
+    "GET /?token={t} HTTP/1.1\r\nHost: x\r\nX-Long: " + "a" * 70_000 + "\r\n\r\n",
+    "POST /?token={t} HTTP/1.1\r\nHost: x\r\nTransfer-Encoding: chunked\r\n\r\nzz\r\n",
+    "POST /?token={t} HTTP/1.1\r\nHost: x\r\nContent-Length: 3\r\nContent-Length: 4\r\n\r\nabc",
+    "GET /?token={t} HTTP/1.1\r\nHost: x\r\nX-Nul: a\x00b\r\n\r\n",
+    "GET /?token={t}%ff%fe HTTP/1.1\r\nHost: x\r\n\r\n",
+    "GET /ws?token={t} HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+    "Sec-WebSocket-Version: 13\r\nSec-WebSocket-Key: short\r\n\r\n",
+    "GET /?token={t} HTTP/1.1\r\nHost: x\r\nTransfer-Encoding: gzip, chunked, x\r\n\r\n",
+]
+
+
+def _listening_port(pid: int) -> int:
+    ports = [
+        c.laddr.port for c in psutil.Process(pid).net_connections("tcp") if c.status == "LISTEN"
+    ]
+    assert len(ports) == 1, ports
+    return ports[0]
+
+
+@pytest.mark.slow
+def test_a_sessions_own_port_refuses_malformed_requests_and_sockets_in_one_line_each(tmp_path):
+    """The 12 malformed requests, and a websocket and a page without the session's secret,
+    straight to a forked session's loopback port: each refused, one short line each at most,
+    never a traceback or the launcher's token."""
+    require_fork()
+    options = ("--max-sessions", "1", "--no-spare")
+    log_path = tmp_path / "server.log"
+    with app_process(log_path=log_path, sessions=True, app_args=options) as running:
+
+        async def body():
+            async with aiohttp.ClientSession() as client:
+                url = running.url + "&pixels=32"
+                async with client.get(url, headers=NAVIGATION, allow_redirects=False) as answer:
+                    assert answer.status == 200
+                    await answer.text()
+                session = max(_descendants(running.pid), key=lambda p: p.create_time())
+                port = _listening_port(session.pid)
+                base = f"http://127.0.0.1:{port}"
+                page = (await get(client, f"{base}/?token={running.token}"))[0]
+                try:
+                    await client.ws_connect(f"ws://127.0.0.1:{port}/ws", headers={"Origin": base})
+                    socket_status = 101
+                except aiohttp.WSServerHandshakeError as exc:
+                    socket_status = exc.status
+                return port, page, socket_status
+
+        n_lines_before = len(log_path.read_text().splitlines())
+        port, page_status, socket_status = run(body)
+        assert (page_status, socket_status) == (403, 403)
+        for request in MALFORMED:
+            with socket.create_connection(("127.0.0.1", port), timeout=WAIT_S) as s:
+                s.sendall(request.format(t=running.token).encode("latin-1"))
+                s.settimeout(WAIT_S)
+                with contextlib.suppress(ConnectionResetError):
+                    assert s.recv(1024).split(b" ")[1] in (b"400", b"403", b"404", b"405", b"413")
+        time.sleep(0.5)  # the last lines reach the log
+    lines = log_path.read_text().splitlines()[n_lines_before:]
+    text = "\n".join(lines)
+    assert running.token not in text and "Traceback" not in text, text[-3000:]
+    assert len(lines) <= len(MALFORMED) + 2, text[-3000:]

@@ -9,6 +9,7 @@ or SIGKILL. Every wait is bounded and only catches hangs; no test asserts a wall
 
 from __future__ import annotations
 
+import argparse
 import asyncio
 import concurrent.futures
 import contextlib
@@ -879,6 +880,39 @@ def test_lmapd_app_passes_the_session_and_proxy_options_on(monkeypatch):
     assert given.fork_sessions
     assert (given.input_idle_min, given.max_age_h, given.frame_memory_mb) == (5, 2, 800)
     assert given.public_url == ["https://a.example", "https://b.example:8443"]
+
+
+def _options(parser) -> set[str]:
+    return {
+        flag
+        for action in parser._actions  # argparse keeps no public list of its options
+        if action.help != argparse.SUPPRESS
+        for flag in action.option_strings
+        if flag.startswith("--")
+    }
+
+
+def test_lmapd_app_python_m_app_and_the_serving_docs_name_the_same_flags():
+    import app.main as app_main
+    from simcore.cli import app as cli_app
+
+    sub = argparse.ArgumentParser().add_subparsers()
+    lmapd_app = _options(cli_app.add_parser(sub))
+    python_m_app = set()
+    original = argparse.ArgumentParser.parse_args
+    try:  # the parser app.main builds, read as it parses
+        argparse.ArgumentParser.parse_args = lambda self, argv=None: (
+            python_m_app.update(_options(self)) or original(self, [])
+        )
+        app_main.parse_args([])
+    finally:
+        argparse.ArgumentParser.parse_args = original
+    assert lmapd_app == python_m_app, lmapd_app ^ python_m_app
+    root = Path(__file__).resolve().parents[2]
+    text = " ".join((root / "docs" / name).read_text() for name in ("serving.md", "app.md"))
+    named = set(re.findall(r"`(?:lmapd app [^`]*?)?(--[a-z][a-z-]+)", text))
+    others = {"--set", "--moved", "--no-browser-settle", "--vs-no-preview"}  # other commands'
+    assert named - others <= lmapd_app, (named - others) - lmapd_app
 
 
 def test_refusals_are_logged_a_few_a_window_and_the_held_back_ones_counted(caplog):

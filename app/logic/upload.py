@@ -4,8 +4,9 @@ Only the upload's bytes are used: the client's file name is ignored except for i
 (from an allow-list), and no path given by the client is ever opened. The bytes are parsed in
 memory by trimesh with no file resolver (an OBJ's ``mtllib``, a glTF's external ``uri`` or a PLY's
 texture file are never looked up on the server), checked against the caps below, and re-encoded as
-one self-contained binary glTF in a private temporary directory (``tempfile.mkdtemp``, mode 0700,
-removed at exit). The core then loads that file like any scene's mesh
+one self-contained binary glTF in a private temporary directory (mode 0700, named by the process:
+``app.logic.upload_folders``), removed at exit, or by the launcher when the session dies. The core
+then loads that file like any scene's mesh
 (``simcore.with_overrides(scene, {"target.mesh": path, "target.scale_m_per_unit": s})``), which
 refuses meshes with no triangles, NaN vertices, zero area or an implausible size.
 
@@ -23,7 +24,6 @@ import logging
 import math
 import os
 import shutil
-import tempfile
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -34,6 +34,7 @@ import trimesh
 
 import simcore
 from app.engine import Engine
+from app.logic import upload_folders
 from app.logic.scene_map import resolved_materials
 from app.state import Controls, echo
 from simcore.target import (
@@ -171,9 +172,8 @@ class PrivateDir:
     @property
     def path(self) -> Path:
         with self._lock:
-            if self._path is None:
-                self._path = Path(tempfile.mkdtemp(prefix="lmapd-upload-"))
-                os.chmod(self._path, 0o700)
+            if self._path is None:  # named by this process: the launcher removes a dead one's
+                self._path = upload_folders.new_folder()
                 atexit.register(self.cleanup)
             return self._path
 

@@ -56,6 +56,7 @@ from collections.abc import Callable
 import aiohttp
 from aiohttp import web
 
+from app.logic import upload_folders
 from app.server import connections, headers, pages, proxy, routes, security
 from app.server.caps import FORKED_SESSION_BYTES as FORKED_SESSION_BYTES
 from app.server.caps import MAX_DEFAULT_SESSIONS as MAX_DEFAULT_SESSIONS
@@ -363,6 +364,7 @@ class Launcher:
         """Stop one process: SIGTERM, then SIGKILL after ``wait_s``."""
         self._all.discard(child)
         await child.stop(wait_s)
+        upload_folders.remove_folders_of(child.pid)  # a session killed leaves its uploads
 
     def _forget(self, session_id: str) -> Child | None:
         return self.sessions.pop(session_id, None)
@@ -405,6 +407,7 @@ class Launcher:
                 log.warning("session %s: its process exited (%s)", session_id[:6], code)
                 self._forget(session_id)
                 self._all.discard(child)
+                upload_folders.remove_folders_of(child.pid)
                 for page in list(child.pages):
                     with contextlib.suppress(Exception):
                         await page.close(code=SESSION_ENDED, message=b"session ended")

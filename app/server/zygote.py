@@ -27,7 +27,6 @@ import os
 import signal
 import sys
 
-from app.server import connections
 from app.server.children import ZYGOTE_READY as READY
 from app.server.children import say
 from app.server.children import token_digest as digest
@@ -79,6 +78,8 @@ def main(argv: list[str] | None = None) -> int:
     args = app_main.parse_args(
         ["--shared", "--token-stdin", "--host", "127.0.0.1", "--port", "0", *options]
     )
+    from app.server import connections  # noqa: PLC0415  (aiohttp: after the version check)
+
     # the sessions' logs as the launcher's: one short line per refusal or malformed request,
     # never the request line (it may carry a token) nor a traceback
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")

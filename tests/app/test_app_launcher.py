@@ -23,6 +23,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 import urllib.parse
 from pathlib import Path
@@ -36,6 +37,7 @@ from support.fork import require_fork
 from support.hostile_client import Client
 from support.launch import app_process
 
+from app.logic import upload_folders
 from app.server import connections, proxy
 from app.server import launcher as lau
 
@@ -564,11 +566,17 @@ def test_idle_sessions_end_and_dead_ones_are_forgotten_and_close_stops_all():
             )
             victim = launcher.sessions[dies.id]
             idle_child = launcher.sessions[idle.id]
+            left = Path(tempfile.gettempdir()) / f"{upload_folders.PREFIX}{victim.pid}-test"
+            left.mkdir()  # the dead session's uploads
+            (left / "upload-1.glb").write_bytes(b"x")
+            other = Path(tempfile.mkdtemp(prefix=f"{upload_folders.PREFIX}{os.getpid()}-"))
             # from now on; the page that never connected is given connect_s
             launcher.caps = dataclasses.replace(launcher.caps, idle_s=0.3, connect_s=0.3)
             os.kill(victim.pid, signal.SIGKILL)
             await until(lambda: len(launcher.sessions) == 1, "the idle and the dead session")
             assert launcher.n_reaped == 1 and idle_child.proc.returncode is not None
+            assert not left.exists() and other.is_dir()  # only the dead one's folder removed
+            other.rmdir()
             status, text, _ = await get(client, f"{base}{idle.path}", **idle.headers(base))
             assert status == 404 and "No such session" in text
             assert (await get(client, f"{base}{kept.path}", **kept.headers(base)))[0] == 200
@@ -579,6 +587,29 @@ def test_idle_sessions_end_and_dead_ones_are_forgotten_and_close_stops_all():
         assert pids and not any(psutil.pid_exists(p) and _running(p) for p in pids)
 
     run(body)
+
+
+def test_a_stopped_sessions_page_gets_a_504_after_the_read_timeout_not_a_hang(monkeypatch):
+    monkeypatch.setattr(proxy, "READ_S", 0.5)
+
+    async def body():
+        async with serving(caps(spare=False)) as (launcher, base, client):
+            session = await new_session(client, base)
+            child = launcher.sessions[session.id]
+            assert (await get(client, f"{base}{session.path}", **session.headers(base)))[0] == 200
+            os.kill(child.pid, signal.SIGSTOP)
+            try:
+                stuck = await asyncio.wait_for(
+                    get(client, f"{base}{session.path}", **session.headers(base)), WAIT_S
+                )
+            finally:
+                os.kill(child.pid, signal.SIGCONT)
+            again = await get(client, f"{base}{session.path}", **session.headers(base))
+            return stuck, again
+
+    (status, text, _), again = run(body)
+    assert status == 504 and "not answering" in text
+    assert again[0] == 200
 
 
 def test_a_page_still_loading_keeps_its_session_past_the_idle_time_until_connect_s():

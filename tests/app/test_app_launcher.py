@@ -783,12 +783,12 @@ OPEN_FILES = 1024  # a common default soft limit
 
 
 @contextlib.contextmanager
-def launcher_process(tmp_path: Path, *args: str):
-    """The launcher with stand-in sessions in a process limited to 1,024 open files (soft and
-    hard): (its address with the token, its log file)."""
+def launcher_process(tmp_path: Path, *args: str, open_files: int = OPEN_FILES):
+    """The launcher with stand-in sessions in a process limited to ``open_files`` open files
+    (soft and hard): (its address with the token, its log file)."""
 
     def limit() -> None:
-        resource.setrlimit(resource.RLIMIT_NOFILE, (OPEN_FILES, OPEN_FILES))
+        resource.setrlimit(resource.RLIMIT_NOFILE, (open_files, open_files))
 
     log_path = tmp_path / "launcher.log"
     with open(log_path, "wb") as log_file:
@@ -852,6 +852,76 @@ def test_a_thousand_half_open_connections_do_not_stop_a_page_load(tmp_path):
                 s.close()
         log = log_path.read_text()
         assert "Too many open files" not in log and "Traceback" not in log
+
+
+@pytest.mark.slow
+def test_half_open_floods_from_five_addresses_leave_files_for_a_page_load(tmp_path):
+    """Five addresses (127.0.0.1 to .5, five computers to the launcher), each under its
+    per-address cap, together past the launcher's open-file limit (512 here): the launcher keeps
+    its reserve (closing the longest-idle connections), a page load goes through, and no "Too
+    many open files" is logged."""
+    connections.raise_open_file_limit()  # this process holds the client ends
+    open_files, per_address = 512, 110  # 550 in all, each address under PER_ADDRESS
+    if resource.getrlimit(resource.RLIMIT_NOFILE)[0] < 5 * per_address + 200:
+        skip_unless_ci("this process may not open 750 files")
+    launcher = launcher_process(tmp_path, "--guard-idle-s", "30", open_files=open_files)
+    with launcher as (url, log_path):
+        parts = urllib.parse.urlsplit(url)
+        held = []
+        try:
+            for i in range(1, 6):
+                for _ in range(per_address):
+                    s = socket.socket()
+                    s.bind((f"127.0.0.{i}", 0))
+                    s.settimeout(WAIT_S)
+                    s.connect((parts.hostname, parts.port))
+                    s.sendall(b"GET / HTTP/1.1\r\nHost: x\r\nX-Slow: ")
+                    held.append(s)
+
+            async def body():
+                async with aiohttp.ClientSession(cookie_jar=aiohttp.DummyCookieJar()) as client:
+                    async with client.get(url, headers=NAVIGATION) as answer:
+                        return answer.status, await answer.text()
+
+            status, text = run(lambda: asyncio.wait_for(body(), WAIT_S))
+            assert status == 200 and "/s/" in text
+            closed = sum(1 for s in held if _closed_by_peer(s, time.monotonic() + 0.01))
+            assert closed >= 5 * per_address - open_files + connections.FD_RESERVE
+        finally:
+            for s in held:
+                s.close()
+    log = log_path.read_text()
+    assert "Too many open files" not in log and "Traceback" not in log
+    assert "open files near the limit" in log
+
+
+def test_failed_accepts_log_one_line_a_second_without_a_traceback(caplog):
+    now = [0.0]
+    accepts = connections._AcceptErrors(
+        connections.ShortLog(logging.getLogger("asyncio"), 1, 1.0, clock=lambda: now[0])
+    )
+    logger = logging.getLogger("asyncio")
+    logger.addFilter(accepts)
+    error = OSError(24, "Too many open files")
+    try:
+        with caplog.at_level(logging.WARNING, logger="asyncio"):
+            for step in range(300):  # 3 s of retries, 100 a second
+                now[0] = step / 100
+                try:
+                    raise error
+                except OSError:
+                    logger.error("socket.accept() out of system resource", exc_info=True)
+            logger.error("another asyncio error")
+    finally:
+        logger.removeFilter(accepts)
+    lines = [r.getMessage() for r in caplog.records]
+    assert lines[0] == "could not accept a connection (Too many open files)"
+    assert (
+        lines[1:3]
+        == ["could not accept a connection (Too many open files) (99 more like it not logged)"] * 2
+    )
+    assert lines[3:] == ["another asyncio error"]
+    assert not any(r.exc_info for r in caplog.records[:3])
 
 
 def _closed_by_peer(s: socket.socket, deadline: float) -> bool:

@@ -199,7 +199,7 @@ class Launcher:
         client = request.cookies.get(routes.client_cookie(request), "")
         if not routes.CLIENT_ID.match(client):
             client = secrets.token_urlsafe(16)
-        address = request.remote or ""
+        address = routes.client_address(request, behind_proxy=bool(self.door.origins))
         problem = self.over_caps(address)
         if problem:
             return self.refuse(request, problem)
@@ -273,7 +273,9 @@ class Launcher:
                 f"server allows ({self.caps.memory_cap_bytes / MIB:,.0f} MB)."
             )
         limit = self.caps.per_address
-        if limit and address and address not in security.LOOPBACK_NAMES:
+        # this machine's own tabs are not capped, unless the server listens beyond it
+        exempt = address in security.LOOPBACK_NAMES and self.door.host in security.LOOPBACK_NAMES
+        if limit and address and not exempt:
             n_mine = sum(1 for c in self.sessions.values() if c.address == address)
             if n_mine >= limit:
                 return f"Your computer has {n_mine} sessions open, the most it may have."

@@ -61,10 +61,10 @@ def run(coroutine_fn, *args):
 
 
 @contextlib.asynccontextmanager
-async def serving(the_caps: lau.Caps):
+async def serving(the_caps: lau.Caps, **options):
     """A launcher with stand-in sessions on a free port, behind its connection guard:
-    (launcher, base address, client)."""
-    launcher = lau.Launcher(TOKEN, "127.0.0.1", the_caps, command=fake_command)
+    (launcher, base address, client); ``options``: the Launcher's own (``origins``)."""
+    launcher = lau.Launcher(TOKEN, "127.0.0.1", the_caps, command=fake_command, **options)
     runner = web.AppRunner(launcher.web_app(), access_log=None)
     await runner.setup()
     server, sweeper, port = await connections.listen(runner, launcher.guard, "127.0.0.1", 0)
@@ -463,6 +463,33 @@ def test_a_burst_of_page_loads_counts_starting_sessions_at_their_size():
             assert len(launcher.sessions) == 2 and len(launcher._all) == 2
 
     run(body)
+
+
+@pytest.mark.parametrize("behind_proxy", [True, False], ids=["proxy", "no-proxy"])
+def test_behind_a_configured_proxy_the_address_cap_counts_the_forwarded_address(behind_proxy):
+    """Every student arrives from the proxy's loopback address: with --public-url the cap is
+    kept per forwarded address; without one the header is not believed (loopback: no cap)."""
+    options = {"origins": ("https://lab.example",)} if behind_proxy else {}
+
+    async def body():
+        async with serving(caps(per_address=1, spare=False, max_sessions=5), **options) as (
+            launcher,
+            base,
+            client,
+        ):
+            statuses = []
+            for forwarded in ("10.0.0.5", "10.0.0.5", "198.51.100.7, 10.0.0.6", "10.0.0.5"):
+                headers = {"X-Forwarded-For": forwarded}
+                status, _, _ = await open_door(client, base, "", **headers)
+                statuses.append(status)
+                await until(lambda: launcher.n_starting == 0, "the door to finish")
+            return statuses, sorted(c.address for c in launcher.sessions.values())
+
+    statuses, addresses = run(body)
+    if behind_proxy:
+        assert statuses == [200, 503, 200, 503] and addresses == ["10.0.0.5", "10.0.0.6"]
+    else:
+        assert statuses == [200] * 4 and addresses == ["127.0.0.1"] * 4
 
 
 def test_a_browser_holds_at_most_its_share_of_sessions():

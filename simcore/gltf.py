@@ -205,16 +205,14 @@ def _buffer_lengths(
     for i, buffer in enumerate(buffers):
         declared = _count(buffer.get("byteLength"), f"buffer {i} byteLength")
         uri = buffer.get("uri")
-        if uri is not None and not (isinstance(uri, str) and uri.startswith("data:")):
-            if folder is None or not isinstance(uri, str):
-                _buffer_bytes(buffer, binary, folder, i)  # raises its message
+        if isinstance(uri, str) and not uri.startswith("data:") and folder is not None:
             try:
-                size = (folder / uri).stat().st_size  # type: ignore[operator]  # checked above
+                size = (folder / uri).stat().st_size
             except OSError as exc:
                 raise GltfError(
                     f"glTF buffer {i}: cannot read {uri[:80]!r} ({exc.strerror})"
                 ) from None
-        else:
+        else:  # the BIN chunk or a data URI (an external file with no folder: refused there)
             held[i] = _buffer_bytes(buffer, binary, folder, i)
             size = len(held[i])
         if size < declared:
@@ -241,9 +239,9 @@ def _check_views(views: list[dict], lengths: list[int]) -> None:
             raise GltfError(f"glTF bufferView {i} byteStride {stride!r} is not 4 to 252")
 
 
-def _compressed_accessors(meshes: list[dict]) -> set:
+def _compressed_accessors(meshes: list[dict]) -> set[object]:
     """The accessors a compressed primitive fills (its attributes and indices)."""
-    filled = set()
+    filled: set[object] = set()
     for mesh in meshes:
         for primitive in _primitives(mesh):
             extensions = primitive.get("extensions")

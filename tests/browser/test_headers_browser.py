@@ -12,7 +12,7 @@ import urllib.parse
 
 import psutil
 import pytest
-from support.launch import app_process, free_port, wait_first_frame
+from support.launch import app_process, free_port, wait_first_frame, wait_settled
 
 pytestmark = pytest.mark.browser
 
@@ -62,6 +62,7 @@ def test_the_shared_app_runs_under_its_headers_and_a_foreign_frame_gets_no_app(p
     assert headers["referrer-policy"] == "no-referrer"
     assert headers["cache-control"] == "no-store"
     wait_first_frame(page)
+    wait_settled(page)  # the charts' library too, loaded after the first frame
     assert violations(page) == []
     server, foreign = serve_page(f"<!doctype html><iframe src='{app_url}'></iframe>")
     try:
@@ -87,6 +88,7 @@ def test_behind_the_launcher_the_door_and_the_session_run_under_their_headers(pa
         page.goto(running.url + SMALL, wait_until="commit")
         page.wait_for_url(lambda url: "/s/" in url or "token" not in url, timeout=120_000)
         wait_first_frame(page)
+        wait_settled(page)
         assert violations(page) == []
         n_before = len(psutil.Process(running.pid).children(recursive=True))
         door = urllib.parse.urlsplit(running.url)._replace(query="").geturl()

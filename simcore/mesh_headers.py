@@ -121,6 +121,19 @@ def _ply_property_bytes(words: list[str], number: int, corners: int) -> int:
         raise MeshHeaderError(f"PLY header line {number} is not a known property") from None
 
 
+_OBJ_CHUNK_BYTES = 1 << 20  # read in pieces of about this size, cut at line ends
+
+
 def _obj_counts(data: bytes) -> tuple[int, int]:
-    triangles = len(b" ".join(_OBJ_FACE.findall(data)).split())
-    return triangles, len(_OBJ_VERTEX.findall(data))
+    """Counted a piece at a time (the matches of one piece only are held: a 4 M-face file's
+    lines all at once would be some 250 MB of small objects)."""
+    triangles = vertices = 0
+    start = 0
+    while start < len(data):
+        end = data.find(b"\n", start + _OBJ_CHUNK_BYTES)
+        end = len(data) if end < 0 else end + 1
+        piece = data[start:end]
+        triangles += len(b" ".join(_OBJ_FACE.findall(piece)).split())
+        vertices += sum(1 for _ in _OBJ_VERTEX.finditer(piece))
+        start = end
+    return triangles, vertices

@@ -73,7 +73,7 @@ from app.server.routes import navigation_problem, safe_rest, session_cookie
 
 log = logging.getLogger(__name__)
 
-SESSION_ENDED = 4000  # the websocket close code of an ended session (the page says so)
+SESSION_ENDED = proxy.SESSION_ENDED  # the websocket close code of an ended session
 NO_STORE = {"Cache-Control": "no-store"}
 
 

@@ -21,6 +21,7 @@ log = logging.getLogger("app.server.launcher")  # the proxy's lines keep their l
 # a session's process that has not sent a byte of its answer this long is taken as stuck (a
 # stopped or swapping process): the page gets a 504 instead of waiting for ever [s]
 READ_S = 30.0
+SESSION_ENDED = 4000  # the websocket close code of an ended session (the page says so)
 FRAME_BYTES = security.WS_CHUNK_BYTES + 4096  # one websocket frame: a wslink chunk and its header
 PASSED_HEADERS = (
     "Content-Type",
@@ -112,6 +113,9 @@ async def websocket(
         for task in tasks:
             task.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)  # each one's end read, none logged
+        if upstream.closed and upstream.close_code == SESSION_ENDED and not page.closed:
+            # the session ended itself (unused): the page says "session ended"
+            await page.close(code=SESSION_ENDED, message=b"session ended")
     finally:
         child.n_sockets -= 1
         child.pages.discard(page)

@@ -37,6 +37,7 @@ and ``clear_state_client_cache`` of trame's protocol instance, see ``attach``):
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -71,6 +72,10 @@ class ClientStateSync:
         self.refusals: dict[str, Callable[[Any], None]] = {}
         self.n_dropped = 0
         self.n_echoes = 0
+        # when a page last changed the scene (a value it set that differs from the one held, or
+        # a trigger whose run changed the state): a session's use, as its reaper counts it
+        self.last_change_s = time.monotonic()
+        self.n_pushed_keys = 0  # state keys pushed so far (a trigger's effect is seen by it)
 
     def attach(self, protocol) -> None:
         """Take over trame's state push on its protocol instance (trame-server 4.1.0)."""
@@ -93,6 +98,7 @@ class ClientStateSync:
         """Send each page the modified values it does not hold yet (held keys wait)."""
         values, packed = clean_state(modified_state)
         keys = [k for k in values if k not in self._held]
+        self.n_pushed_keys += len(keys)
         for client_id in self.clients():
             sent = self._sent.setdefault(client_id, {})
             update = {k: values[k] for k in keys if sent.get(k) != packed[k]}
@@ -115,6 +121,8 @@ class ClientStateSync:
         """Store the accepted ``(key, value)`` changes of one page, run the change callbacks, then
         send the resulting values to the pages that do not hold them. Returns what was accepted."""
         accepted, echoes = self._accept(client_id, changes)
+        if any(self.state[key] != value for key, value in accepted.items()):
+            self.last_change_s = time.monotonic()
         held = set(accepted) - self._held
         self._held |= held
         try:

@@ -156,7 +156,10 @@ def _serve(app, args, token: str, budget: int) -> int:
         app.logic.studies.refresh()  # the study folders written since the app was built
         signal.signal(signal.SIGTERM, process.interrupt)
         process.limit_address_space(budget + process.HEADROOM_BYTES)
-        return process.serve_until_stopped(lambda: app.start(args.host, args.port), args)
+        input_idle_s = max(1.0, 60.0 * args.input_idle_min)
+        return process.serve_until_stopped(
+            lambda: app.start(args.host, args.port, input_idle_s=input_idle_s), args
+        )
     except BaseException:  # a session that cannot start says why and exits; never returns
         import traceback  # noqa: PLC0415
 

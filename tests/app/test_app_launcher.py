@@ -1164,3 +1164,55 @@ def test_a_sessions_own_port_refuses_malformed_requests_and_sockets_in_one_line_
     text = "\n".join(lines)
     assert running.token not in text and "Traceback" not in text, text[-3000:]
     assert len(lines) <= len(MALFORMED) + 2, text[-3000:]
+
+
+@pytest.mark.slow
+def test_a_session_whose_input_changes_nothing_ends_at_its_input_idle_time(tmp_path):
+    """Two forked sessions whose pages send something every half second, with a 6 s input idle
+    time: one sends only what changes nothing (its pitch again, a trigger with no effect, a
+    state read), and ends; the other moves its pitch, and stays."""
+    require_fork()
+    options = ("--max-sessions", "2", "--no-spare", "--input-idle-min", "0.1")
+    log_path = tmp_path / "server.log"
+    with app_process(log_path=log_path, sessions=True, app_args=options) as running:
+
+        async def open_page(client) -> Client:
+            url = running.url + "&pixels=32"
+            async with client.get(url, headers=NAVIGATION, allow_redirects=False) as answer:
+                jar = {k: m.value for k, m in answer.cookies.items()}
+                path = json.loads(MOVE.search(await answer.text())[1]).split("?")[0]
+            ws = await client.ws_connect(
+                f"ws://127.0.0.1:{running.port}{path}ws",
+                headers={
+                    "Origin": running.origin,
+                    "Cookie": "; ".join(f"{k}={v}" for k, v in jar.items()),
+                },
+                max_msg_size=0,
+            )
+            page = Client(ws)
+            assert "result" in await page.hello()
+            return page
+
+        async def body():
+            async with aiohttp.ClientSession() as client:
+                started = time.monotonic()  # before the session starts
+                idle, busy = await open_page(client), await open_page(client)
+                for step in range(int(WAIT_S * 2)):
+                    await asyncio.sleep(0.5)
+                    try:
+                        await idle.set_state(pitch_deg=0)  # the value it holds
+                        await idle.call("trame.trigger", ["unpin_frame", [], {}])  # none pinned
+                        await idle.call("trame.state.get")
+                    except ConnectionError as exc:
+                        ended_s, why = time.monotonic() - started, str(exc)
+                        break
+                    await busy.set_state(pitch_deg=1 + step % 2)
+                else:
+                    raise AssertionError("the unused session did not end")
+                alive = "result" in await busy.call("trame.state.get")
+                await busy.ws.close()
+                return ended_s, why, alive
+
+        ended_s, why, alive = run(body)
+        assert 6 <= ended_s < 6 + 10, ended_s  # its idle time, the reaper's round and a margin
+        assert str(lau.SESSION_ENDED) in why and alive

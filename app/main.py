@@ -224,7 +224,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--input-idle-min",
         type=float,
         default=30.0,
-        help="a session whose page has sent nothing (no control moved) this long ends, even with "
+        help="a session whose page has changed nothing (no control moved) this long ends, even with "
         "the page open (default 30 min)",
     )
     parser.add_argument(

@@ -31,7 +31,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     app.add_argument(
         "--input-idle-min",
         type=float,
-        help="a session whose page sends nothing this long ends, open or not [min] (default 30)",
+        help="a session whose page changes nothing this long ends, open or not [min] (default 30)",
     )
     app.add_argument("--max-age-h", type=float, help="a session ends this old [h] (default 8)")
     app.add_argument(

@@ -224,8 +224,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--input-idle-min",
         type=float,
         default=30.0,
-        help="a session whose page has changed nothing (no control moved) this long ends, even with "
-        "the page open (default 30 min)",
+        help="a session whose page has changed nothing (no control moved) this long ends, even "
+        "with the page open (default 30 min)",
     )
     parser.add_argument(
         "--max-age-h", type=float, default=8.0, help="a session ends this old (default 8 h)"

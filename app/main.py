@@ -9,11 +9,14 @@ processes) is app.server's.
 from __future__ import annotations
 
 import argparse
+import asyncio
 import itertools
 import logging
+import os
 import secrets
 import signal
 import sys
+import time
 
 from trame.app import get_server
 
@@ -75,9 +78,12 @@ class LmapdApp:
         port: int,
         limits: security.Limits | None = None,
         origins: tuple[str, ...] = (),
+        input_idle_s: float | None = None,
     ) -> None:
         """Serve until interrupted: no browser is opened and an idle server stays alive. Only
-        the page at the printed address (it carries the access token) can connect."""
+        the page at the printed address (it carries the access token) can connect.
+        ``input_idle_s``: a launcher's session ends itself when no page has changed its scene
+        this long (input that changes nothing, a ping, the same value again, does not count)."""
         trame_args = trame_arguments(host, port, self.token)
         cli = self.server.cli
         parse = cli.parse_known_args
@@ -96,6 +102,12 @@ class LmapdApp:
             limits=limits,
             origins=origins,
         )
+        self.guard.sync.refusals.update(self.uploads.refusals())
+        if input_idle_s is not None:
+            guard = self.guard
+            self.server.controller.on_server_ready.add(
+                lambda **_: asyncio.ensure_future(end_when_unused(guard, input_idle_s))
+            )
         self.server.start(
             host=host, port=port, open_browser=False, timeout=0, show_connection_info=False
         )
@@ -104,6 +116,23 @@ class LmapdApp:
         host = self.server.server_options.host
         lines = start_message(host, self.server.port, self.token)
         say(*lines, *public_lines(self.origins, self.token))
+
+
+SESSION_ENDED = 4000  # the close code a page reads as "session ended" (app.server.proxy's)
+
+
+async def end_when_unused(guard, input_idle_s: float, period_s: float = 1.0) -> None:
+    """End this session once no page has changed its scene for ``input_idle_s`` (``guard``:
+    the app's Guard; its ClientStateSync's ``last_change_s`` says when): its pages' websockets
+    are closed as "session ended", then the process stops (SIGTERM, as the launcher's stop)."""
+    while True:
+        await asyncio.sleep(period_s)
+        unused_s = time.monotonic() - guard.sync.last_change_s
+        if unused_s >= input_idle_s:
+            say(f"lmapd-sim session: no input that changed the scene for {unused_s:.0f} s: ending")
+            await guard.close_all(SESSION_ENDED, b"session ended")
+            os.kill(os.getpid(), signal.SIGTERM)
+            return
 
 
 def client_keys() -> dict[str, security.Screen]:
@@ -197,8 +226,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--input-idle-min",
         type=float,
         default=30.0,
-        help="a session whose page has sent nothing (no control moved) this long ends, even with "
-        "the page open (default 30 min)",
+        help="a session whose page has changed nothing (no control moved) this long ends, even "
+        "with the page open (default 30 min)",
     )
     parser.add_argument(
         "--max-age-h", type=float, default=8.0, help="a session ends this old (default 8 h)"
@@ -255,4 +284,9 @@ def main(argv: list[str] | None = None) -> int:
         signal.signal(signal.SIGTERM, interrupt)  # the launcher stops its sessions gracefully
         limit_address_space(budget + HEADROOM_BYTES)  # one session cannot take the machine
     origins = tuple(args.public_url)
-    return serve_until_stopped(lambda: app.start(args.host, args.port, origins=origins), args)
+    input_idle_s = max(1.0, 60.0 * args.input_idle_min) if token is not None else None
+
+    def serve() -> None:
+        app.start(args.host, args.port, origins=origins, input_idle_s=input_idle_s)
+
+    return serve_until_stopped(serve, args)

@@ -17,7 +17,8 @@ from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
-from .gltf import GltfError, check_gltf_file
+from .gltf import MAX_ACCESSOR_VALUES, MAX_TRIANGLES, MAX_VERTICES, GltfError, check_gltf_file
+from .mesh_headers import MeshHeaderError, declared_counts
 
 if TYPE_CHECKING:  # trimesh loads when a mesh file is read or ``TargetMesh.as_trimesh`` is asked
     import trimesh
@@ -153,11 +154,20 @@ class TargetMesh:
 
 
 def load_mesh_file(
-    file_obj, file_type: str | None, **load_options
+    file_obj,
+    file_type: str | None,
+    *,
+    max_faces: int = MAX_TRIANGLES,
+    max_vertices: int = MAX_VERTICES,
+    max_values: int = MAX_ACCESSOR_VALUES,
+    **load_options,
 ) -> trimesh.Trimesh | trimesh.Scene:
-    """``trimesh.load`` of a mesh file that refuses NaN or infinite vertices in every format and
-    reads a glTF only once it has passed :func:`simcore.gltf.check_gltf_file` (the caps, and its
-    Draco-compressed geometry decoded in a child process under memory and time limits).
+    """``trimesh.load`` of a mesh file that refuses NaN or infinite vertices in every format, and
+    files that declare more than ``max_faces`` triangles or ``max_vertices`` vertices before any
+    array is made: a glTF only once it has passed :func:`simcore.gltf.check_gltf_file` (the
+    caps and totals, every buffer holding what its accessors need, and its Draco-compressed
+    geometry decoded in a child process under memory and time limits); an OBJ, PLY or STL once
+    its declared counts (:func:`simcore.mesh_headers.declared_counts`) are within the limits.
 
     trimesh's default processing drops the triangles of non-finite vertices from OBJ, PLY and STL
     files without a word (glTF is not processed), so the file is read unprocessed, checked, then
@@ -167,27 +177,30 @@ def load_mesh_file(
     ----------
     file_obj : path or binary file
         A path (a ``.gltf``'s buffer files are read beside it) or an open file (a ``.gltf`` must
-        then hold its buffers: uploads read no other file).
+        then hold its buffers, a PLY's texture is not looked for: uploads read no other file).
+    max_faces, max_vertices : int
+        The most triangles and vertices the file may declare (all its meshes together).
+    max_values : int
+        The most scalar values a glTF's accessors may declare together.
 
     Raises
     ------
     TargetError
-        A vertex coordinate is NaN or infinite; a glTF over a cap or with compressed geometry
-        that cannot be decoded (the message names no file: callers add it).
+        A vertex coordinate is NaN or infinite; a file over the limits or that does not hold
+        what it declares; a glTF over a cap or with compressed geometry that cannot be decoded
+        (the message names no file: callers add it).
     """
     import trimesh  # noqa: PLC0415  (only to read a mesh file: the cached path needs none)
 
     kind = (file_type or "").lower().lstrip(".")
-    if kind in ("glb", "gltf"):
-        if isinstance(file_obj, str | Path):
-            data, folder = Path(file_obj).read_bytes(), Path(file_obj).parent
-        else:
-            data, folder = file_obj.read(), None
-            file_obj = io.BytesIO(data)
-        try:
-            check_gltf_file(data, kind == "glb", folder)
-        except GltfError as exc:
-            raise TargetError(f"cannot read the .{kind} file ({exc})") from None
+    if isinstance(file_obj, str | Path):
+        data, folder = Path(file_obj).read_bytes(), Path(file_obj).parent
+    else:
+        data, folder = file_obj.read(), None
+        file_obj = io.BytesIO(data)
+        if kind == "ply":  # a texture comment names a file no upload brings
+            load_options = {"skip_materials": True, **load_options}
+    _check_declared(data, kind, folder, (max_faces, max_vertices, max_values))
     if kind == "obj":  # each named object (o) and group (g) of an OBJ becomes a part
         load_options = {"split_objects": True, "split_groups": True, **load_options}
     loaded = trimesh.load(file_obj, file_type=file_type, force=None, process=False, **load_options)
@@ -199,6 +212,39 @@ def load_mesh_file(
         for mesh in meshes:
             mesh.process()
     return cast("trimesh.Trimesh | trimesh.Scene", loaded)  # trimesh.load: one of the two here
+
+
+def _check_declared(
+    data: bytes, kind: str, folder: Path | None, limits: tuple[int, int, int]
+) -> None:
+    """TargetError if the file declares more than the limits (triangles, vertices, a glTF's
+    accessor values) or less than it needs."""
+    max_faces, max_vertices, max_values = limits
+    if kind in ("glb", "gltf"):
+        try:
+            check_gltf_file(
+                data,
+                kind == "glb",
+                folder,
+                max_triangles=max_faces,
+                max_vertices=max_vertices,
+                max_values=max_values,
+            )
+        except GltfError as exc:
+            raise TargetError(f"cannot read the .{kind} file ({exc})") from None
+        return
+    try:
+        n_faces, n_vertices = declared_counts(data, kind)
+    except MeshHeaderError as exc:
+        raise TargetError(f"cannot read the .{kind} file ({exc})") from None
+    if n_faces > max_faces:
+        raise TargetError(
+            f"the .{kind} file declares {n_faces:,} triangles; the limit is {max_faces:,}"
+        )
+    if n_vertices > max_vertices:
+        raise TargetError(
+            f"the .{kind} file declares {n_vertices:,} vertices; the limit is {max_vertices:,}"
+        )
 
 
 @dataclass(frozen=True)

@@ -262,6 +262,7 @@ SIMCORE_FLOORS = (
         "simcore.cache",
         "simcore.parallel",
         "simcore.gltf",
+        "simcore.mesh_headers",
         "simcore.calibration",
         "simcore.illumination",
         "simcore.materials",

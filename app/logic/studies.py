@@ -4,7 +4,8 @@ front, its front designs with their requirement margins), and any of its designs
 main views at the envelope point where it meets its requirements least (its scene and seed).
 
 A page names a study only by its folder's name, which must be one of those listed: nothing
-outside the studies folder is read."""
+outside the studies folder is read (a folder, or a file in it, that links outside is not listed).
+Record files that are no record of the study are left out and named in the message."""
 
 from __future__ import annotations
 
@@ -18,6 +19,20 @@ from simcore import design
 
 STATE_KEYS = ("design_study",)  # what a page sets: a listed study's name
 MAX_STUDIES = 200  # folders listed at most
+MAX_NAMED = 5  # malformed records named in the message at most (the rest counted)
+
+
+def _inside(folder: Path, root: Path) -> bool:
+    """Whether ``folder``, its ``records/`` and every file in them resolve inside ``root``
+    (no link out of the studies folder)."""
+    try:
+        paths = [folder, *folder.iterdir()]
+        records = folder / "records"
+        if records.is_dir():
+            paths += list(records.iterdir())
+        return all(p.resolve().is_relative_to(root) for p in paths)
+    except (OSError, RuntimeError):  # unreadable, or a loop of links
+        return False
 
 
 class DesignStudies:
@@ -52,11 +67,15 @@ class DesignStudies:
         self.state.design_studies = self.names()
 
     def names(self) -> list[str]:
-        """The study folders (those holding a study.toml), by name."""
+        """The study folders (those holding a study.toml), by name: only folders that are
+        inside the studies folder once links are resolved, and whose files are too."""
         if self.folder is None or not self.folder.is_dir():
             return []
+        root = self.folder.resolve()
         found = sorted(
-            p.name for p in self.folder.iterdir() if p.is_dir() and (p / "study.toml").is_file()
+            p.name
+            for p in self.folder.iterdir()
+            if p.is_dir() and (p / "study.toml").is_file() and _inside(p, root)
         )
         return found[:MAX_STUDIES]
 
@@ -77,6 +96,7 @@ class DesignStudies:
                 update["design_message"] = f"Cannot read the study {name}: {exc}"
             else:
                 study = self.current.study
+                skipped = self.current.skipped
                 screened = sum(r.stage == "screen" for r in self.current.records)
                 winner = "no design meets every requirement"
                 if self.current.winner is not None:
@@ -85,7 +105,12 @@ class DesignStudies:
                     "design_front": payload.front_figure(self.current),
                     "design_rows": payload.design_rows(self.current),
                     "design_message": f"{study.name}: {screened} designs screened over "
-                    f"{len(study.envelope)} envelope points; {winner}.",
+                    f"{len(study.envelope)} envelope points; {winner}."
+                    + (f" Left out {len(skipped)} malformed records: " if skipped else "")
+                    + "; ".join(skipped[:MAX_NAMED])
+                    + (
+                        f"; and {len(skipped) - MAX_NAMED} more" if len(skipped) > MAX_NAMED else ""
+                    ),
                 }
         with self.state:
             self.state.update(update)

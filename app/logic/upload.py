@@ -4,8 +4,9 @@ Only the upload's bytes are used: the client's file name is ignored except for i
 (from an allow-list), and no path given by the client is ever opened. The bytes are parsed in
 memory by trimesh with no file resolver (an OBJ's ``mtllib``, a glTF's external ``uri`` or a PLY's
 texture file are never looked up on the server), checked against the caps below, and re-encoded as
-one self-contained binary glTF in a private temporary directory (``tempfile.mkdtemp``, mode 0700,
-removed at exit). The core then loads that file like any scene's mesh
+one self-contained binary glTF in a private temporary directory (mode 0700, named by the process:
+``app.logic.upload_folders``), removed at exit, or by the launcher when the session dies. The core
+then loads that file like any scene's mesh
 (``simcore.with_overrides(scene, {"target.mesh": path, "target.scale_m_per_unit": s})``), which
 refuses meshes with no triangles, NaN vertices, zero area or an implausible size.
 
@@ -23,7 +24,6 @@ import logging
 import math
 import os
 import shutil
-import tempfile
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -34,6 +34,7 @@ import trimesh
 
 import simcore
 from app.engine import Engine
+from app.logic import upload_folders
 from app.logic.scene_map import resolved_materials
 from app.state import Controls, echo
 from simcore.target import (
@@ -49,6 +50,10 @@ log = logging.getLogger(__name__)
 ALLOWED_SUFFIXES = (".glb", ".gltf", ".obj", ".stl", ".ply")
 MAX_UPLOAD_BYTES = 32 * 2**20  # 32 MiB per file
 MAX_UPLOAD_FACES = 1_000_000  # triangles per uploaded target
+MAX_UPLOAD_VERTICES = 3 * MAX_UPLOAD_FACES  # vertices per uploaded target (unshared corners)
+# scalar values a glTF upload's accessors may declare together: a million triangles with their
+# positions, normals and texture coordinates (3 + 9 + 9 + 6 M) and margin
+MAX_UPLOAD_VALUES = 40_000_000
 SCALE_RANGE = (1e-6, 1e4)  # metres per mesh unit
 DEFAULT_SCALE = 1.0
 
@@ -83,6 +88,8 @@ def upload_content(value: Any) -> tuple[bytes, str]:
     content = value.get("content")
     if isinstance(content, memoryview | bytearray):
         content = bytes(content)
+    if isinstance(content, str):
+        raise UploadError("the file's content came as text, not as the file's bytes")
     if not isinstance(content, bytes):
         error = value.get("error")
         why = f": {echo(error)}" if error else ""
@@ -113,8 +120,15 @@ def self_contained_glb(data: bytes, suffix: str) -> tuple[bytes, int]:
     """Parse a mesh file from its bytes alone and re-encode it as one binary glTF (parts kept as
     its geometries); also return its triangle count. Raises UploadError for files that cannot
     be read, hold no triangles, too many, or non-finite vertices."""
-    try:  # NaN or infinite vertices are refused here, in every format (the core's check)
-        loaded = load_mesh_file(io.BytesIO(data), file_type=suffix[1:], resolver=None)
+    try:  # declared counts over the limits, and NaN or infinite vertices, refused (the core's)
+        loaded = load_mesh_file(
+            io.BytesIO(data),
+            file_type=suffix[1:],
+            max_faces=MAX_UPLOAD_FACES,
+            max_vertices=MAX_UPLOAD_VERTICES,
+            max_values=MAX_UPLOAD_VALUES,
+            resolver=None,
+        )
     except TargetError as exc:
         raise UploadError(str(exc)) from None
     except Exception as exc:  # trimesh raises many types for malformed files
@@ -158,9 +172,8 @@ class PrivateDir:
     @property
     def path(self) -> Path:
         with self._lock:
-            if self._path is None:
-                self._path = Path(tempfile.mkdtemp(prefix="lmapd-upload-"))
-                os.chmod(self._path, 0o700)
+            if self._path is None:  # named by this process: the launcher removes a dead one's
+                self._path = upload_folders.new_folder()
                 atexit.register(self.cleanup)
             return self._path
 
@@ -310,8 +323,8 @@ class TargetUploads:
 
     # -- handlers (event loop) --------------------------------------------------------------------
     def on_upload(self, upload_file: Any = None, **_: Any) -> None:
-        if not upload_file:  # None, or an empty selection (the input was cleared)
-            return
+        if upload_file is None or (isinstance(upload_file, list) and not upload_file):
+            return  # nothing, or an empty selection (the input was cleared)
         # drop the bytes from the shared state at once, and empty the input: the same file can
         # be picked again (after a refusal, or with another scale)
         self.state.upload_file = None
@@ -334,6 +347,28 @@ class TargetUploads:
                 raise
 
         self._start(work)
+
+    def refusals(self) -> dict[str, Callable[[Any], None]]:
+        """What the page is told of an upload value refused before it reached the state (a
+        list of files, a scale that is a list): state key -> called with the refused value."""
+
+        def refused_file(value: Any) -> None:
+            try:
+                upload_content(value)
+                text = f"not a file upload ({echo(value)})"
+            except UploadError as exc:
+                text = str(exc)
+            self._fail(f"{upload_name(value)}: {text}")
+
+        def refused_scale(value: Any) -> None:
+            try:
+                scale_value(value)
+                text = f"scale {echo(value)} is not a number"
+            except UploadError as exc:
+                text = str(exc)
+            self.state.upload_error = f"{text}; kept the previous scale"
+
+        return {"upload_file": refused_file, "upload_scale": refused_scale}
 
     def on_scale(self, upload_scale: Any = None, **_: Any) -> None:
         try:

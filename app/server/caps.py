@@ -37,8 +37,9 @@ class Caps:
     input_idle_s : a session whose page has sent nothing this long is stopped, socket or not [s]
     max_age_s : a session this old is stopped [s]
     per_client : sessions of one browser (its client cookie); a new one ends its oldest
-    per_address : sessions of one client address other than loopback (a reverse proxy on this
-        machine is loopback) [0: no limit]
+    per_address : sessions of one client address [0: no limit]: loopback is not capped while
+        the launcher listens on loopback only; behind a configured reverse proxy the address is
+        the one the proxy forwards (``app.server.routes.client_address``)
     sockets_per_session : websockets open at once on one session
     session_bytes : what a session is counted at in the memory cap until it measures more [bytes]
     """

@@ -24,6 +24,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import os
 import resource
 import time
 from collections.abc import Callable
@@ -34,6 +35,14 @@ from aiohttp import web
 log = logging.getLogger(__name__)
 
 IDLE_S = 10.0  # a connection outside any request this long is closed [s]
+# connections the kernel queues for a listening socket; asyncio accepts up to this many at one
+# wake-up before any of them is seen by the guard
+BACKLOG = 128
+# open files kept free for the server's own work (a page load's connection to its session, a
+# session's pipes, the files it serves) and for one wake-up's accepts: past the limit less
+# this, a new connection closes the longest-idle one of any address first, or is itself closed
+# when all are busy
+FD_RESERVE = BACKLOG + 64
 PER_ADDRESS = 256  # connections of one client address (a reverse proxy is one address)
 SWEEP_S = 1.0
 AIOHTTP_LOGGERS = ("aiohttp.server", "aiohttp.web", "aiohttp.websocket", "aiohttp.access")
@@ -117,8 +126,21 @@ class ConnectionGuard:
 
         return make
 
+    def files_short(self) -> bool:
+        """Whether the process's open files are within ``FD_RESERVE`` of its limit (counted
+        only once this guard holds a quarter of the limit: a listing of /proc/self/fd)."""
+        soft = resource.getrlimit(resource.RLIMIT_NOFILE)[0]
+        if soft == resource.RLIM_INFINITY or self.n_open < (soft - FD_RESERVE) // 4:
+            return False
+        try:
+            return len(os.listdir("/proc/self/fd")) > soft - FD_RESERVE
+        except OSError:
+            return False
+
     def _opened(self, conn: _Guarded) -> None:
         self._by_handler[id(conn.inner)] = conn
+        if self.files_short() and not self._make_room(conn):
+            return
         mine = self.by_address.setdefault(conn.address, [])
         if len(mine) >= self.per_address:
             idle = [c for c in mine if not c.busy]
@@ -145,6 +167,29 @@ class ConnectionGuard:
                 conn.close()
                 return
         mine.append(conn)
+
+    def _make_room(self, conn: _Guarded) -> bool:
+        """Near the open-file limit: close the longest-idle connection of any address (True),
+        or ``conn`` itself when every one is busy (False)."""
+        idle = [c for conns in self.by_address.values() for c in conns if not c.busy]
+        if idle:
+            oldest = min(idle, key=lambda c: c.idle_since_s)
+            self.n_evicted += 1
+            self.log.warning(
+                "files",
+                "closed an idle connection of %s: open files near the limit",
+                oldest.address,
+            )
+            self._forget(oldest)
+            oldest.close()
+            return True
+        self.n_refused += 1
+        self.log.warning(
+            "files-refused", "refused a connection from %s: open files near the limit", conn.address
+        )
+        self._by_handler.pop(id(conn.inner), None)
+        conn.close()
+        return False
 
     def _closed(self, conn: _Guarded) -> None:
         self._forget(conn)
@@ -203,7 +248,7 @@ async def listen(
     task, the bound port). Raises OSError if it cannot listen."""
     loop = asyncio.get_running_loop()
     server = await loop.create_server(
-        guard.factory(runner.server), host or None, port, reuse_address=True, backlog=512
+        guard.factory(runner.server), host or None, port, reuse_address=True, backlog=BACKLOG
     )
     sweeper = asyncio.create_task(guard.sweep_forever())
     return server, sweeper, int(server.sockets[0].getsockname()[1])
@@ -369,14 +414,44 @@ def _remote(record: logging.LogRecord) -> str:
     return ""
 
 
-_installed: list[_OneLine] = []
+class _AcceptErrors(logging.Filter):
+    """asyncio's record of a failed ``accept()`` (out of open files: it logs a traceback at
+    every retry, hundreds of thousands under a flood) becomes one line, at most one a second,
+    counting those held back; asyncio's other records pass."""
+
+    def __init__(self, short: ShortLog):
+        super().__init__()
+        self.short = short
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if "socket.accept() out of system resource" not in str(record.msg):
+            return True
+        ok, held = self.short.allow("accept")
+        if not ok:
+            return False
+        exc = record.exc_info[1] if record.exc_info else None
+        why = (getattr(exc, "strerror", None) or type(exc).__name__) if exc else "no reason"
+        record.msg = f"could not accept a connection ({why})"
+        record.msg += f" ({held} more like it not logged)" if held else ""
+        record.args = ()
+        record.exc_info = None
+        record.exc_text = None
+        record.stack_info = None
+        record.levelno, record.levelname = logging.WARNING, "WARNING"
+        return True
+
+
+_installed: list[logging.Filter] = []
 
 
 def shorten_server_logs(per_window: int = 5, window_s: float = 10.0) -> None:
-    """Make aiohttp's error records one short line each, rate-limited (idempotent)."""
+    """Make aiohttp's error records one short line each, rate-limited, and asyncio's failed
+    accepts one line a second at most (idempotent)."""
     if _installed:
         return
     one_line = _OneLine(ShortLog(logging.getLogger("aiohttp.server"), per_window, window_s))
-    _installed.append(one_line)
+    accepts = _AcceptErrors(ShortLog(logging.getLogger("asyncio"), 1, 1.0))
+    _installed.extend([one_line, accepts])
     for name in AIOHTTP_LOGGERS:
         logging.getLogger(name).addFilter(one_line)
+    logging.getLogger("asyncio").addFilter(accepts)

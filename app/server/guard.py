@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import time
 from typing import Any
 
 from aiohttp import WSCloseCode
@@ -207,6 +208,13 @@ class Guard(LinkProtocol):
         if ws is not None and not ws.closed:
             await ws.close(code=WSCloseCode.POLICY_VIOLATION, message=b"refused")
 
+    async def close_all(self, code: int, message: bytes) -> None:
+        """Close every page's websocket with ``code`` (a session ending itself)."""
+        connections = dict(self.handler.connections) if self.handler else {}
+        for ws in connections.values():
+            if not ws.closed:
+                await ws.close(code=code, message=message)
+
     def _watch_timeout(self, client_id: str) -> None:
         def check() -> None:
             unchunker = self.unchunkers.get(client_id)
@@ -244,7 +252,10 @@ class Guard(LinkProtocol):
             # answered after the state it caused (busy, corrections): answer_after_pushes
             await self.handler.sendWrappedMessage(rpcid, None, method=method, client_id=client_id)
             return
+        pushed = self.sync.n_pushed_keys
         await dispatch({**rpc, "args": args, "kwargs": {}}, client_id)
+        if method == "trame.trigger" and self.sync.n_pushed_keys > pushed:
+            self.sync.last_change_s = time.monotonic()  # the trigger changed the state
 
     async def _refuse(self, rpcid: str, client_id: str, text: str, method: Any) -> None:
         self.n_refused_calls += 1

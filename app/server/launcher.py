@@ -56,7 +56,8 @@ from collections.abc import Callable
 import aiohttp
 from aiohttp import web
 
-from app.server import connections, pages, proxy, routes, security
+from app.logic import upload_folders
+from app.server import connections, headers, pages, proxy, routes, security
 from app.server.caps import FORKED_SESSION_BYTES as FORKED_SESSION_BYTES
 from app.server.caps import MAX_DEFAULT_SESSIONS as MAX_DEFAULT_SESSIONS
 from app.server.caps import MEMORY_SHARE as MEMORY_SHARE
@@ -72,7 +73,7 @@ from app.server.routes import navigation_problem, safe_rest, session_cookie
 
 log = logging.getLogger(__name__)
 
-SESSION_ENDED = 4000  # the websocket close code of an ended session (the page says so)
+SESSION_ENDED = proxy.SESSION_ENDED  # the websocket close code of an ended session
 NO_STORE = {"Cache-Control": "no-store"}
 
 
@@ -129,6 +130,7 @@ class Launcher:
     def web_app(self) -> web.Application:
         web_app = web.Application(client_max_size=64 * 1024, middlewares=[self.guard.middleware])
         web_app.router.add_route("*", "/{tail:.*}", self.handle)
+        headers.install(web_app)  # CSP, nosniff, no referrer, no-store pages (proxied ones too)
         web_app.on_startup.append(self._on_startup)
         web_app.on_cleanup.append(self._on_cleanup)
         return web_app
@@ -189,10 +191,15 @@ class Launcher:
             self.n_not_navigation += 1
             self.log.warning("navigation", "no session for %s: %s", request.remote, problem)
             return pages.not_a_tab(routes.root_link(request))
+        problem = None if token_cookie else routes.foreign_navigation(request.headers)
+        if problem is not None:  # the cookie alone: only from the app's own pages
+            self.n_not_navigation += 1
+            self.log.warning("navigation", "no session for %s: %s", request.remote, problem)
+            return pages.not_from_here(routes.root_link(request))
         client = request.cookies.get(routes.client_cookie(request), "")
         if not routes.CLIENT_ID.match(client):
             client = secrets.token_urlsafe(16)
-        address = request.remote or ""
+        address = routes.client_address(request, behind_proxy=bool(self.door.origins))
         problem = self.over_caps(address)
         if problem:
             return self.refuse(request, problem)
@@ -216,6 +223,7 @@ class Launcher:
         )
         if token_cookie:
             page.set_cookie(token_cookie, self.token, httponly=True, samesite="Strict")
+        nonce = headers.new_nonce(request)  # the page's one script, in the headers sent now
         self.n_starting += 1
         try:
             ahead = self.n_starting - 1
@@ -238,7 +246,7 @@ class Launcher:
         log.info("session %s: process %d on port %d", session_id[:6], child.pid, child.port)
         settings = [(k, v) for k, v in request.query.items() if k != "token"]
         target = f"/s/{session_id}/" + ("?" + routes.query_string(settings) if settings else "")
-        if not await finish(page, move_html(f"{target}#token={routes.quoted(self.token)}")):
+        if not await finish(page, move_html(f"{target}#token={routes.quoted(self.token)}", nonce)):
             await self.end_session(session_id, "its tab closed before the session started")
         return page
 
@@ -265,7 +273,9 @@ class Launcher:
                 f"server allows ({self.caps.memory_cap_bytes / MIB:,.0f} MB)."
             )
         limit = self.caps.per_address
-        if limit and address and address not in security.LOOPBACK_NAMES:
+        # this machine's own tabs are not capped, unless the server listens beyond it
+        exempt = address in security.LOOPBACK_NAMES and self.door.host in security.LOOPBACK_NAMES
+        if limit and address and not exempt:
             n_mine = sum(1 for c in self.sessions.values() if c.address == address)
             if n_mine >= limit:
                 return f"Your computer has {n_mine} sessions open, the most it may have."
@@ -356,6 +366,7 @@ class Launcher:
         """Stop one process: SIGTERM, then SIGKILL after ``wait_s``."""
         self._all.discard(child)
         await child.stop(wait_s)
+        upload_folders.remove_folders_of(child.pid)  # a session killed leaves its uploads
 
     def _forget(self, session_id: str) -> Child | None:
         return self.sessions.pop(session_id, None)
@@ -398,6 +409,7 @@ class Launcher:
                 log.warning("session %s: its process exited (%s)", session_id[:6], code)
                 self._forget(session_id)
                 self._all.discard(child)
+                upload_folders.remove_folders_of(child.pid)
                 for page in list(child.pages):
                     with contextlib.suppress(Exception):
                         await page.close(code=SESSION_ENDED, message=b"session ended")

@@ -41,6 +41,19 @@ def not_a_tab(link: str) -> web.Response:
     )
 
 
+def not_from_here(link: str) -> web.Response:
+    """The door's answer to a navigation from another site's page that carries only the
+    token's cookie (a 403): the link, followed from this page, starts a session."""
+    return message_page(
+        403,
+        "Open the address that lmapd app printed",
+        "Another page sent this tab here. A session starts from the printed address, or from "
+        "a link of this app's own pages.",
+        link,
+        "Start a session",
+    )
+
+
 def no_session_free(problem: str, idle_s: float, link: str) -> web.Response:
     """The door's answer when the caps leave no room for a session (a 503): ``problem`` says
     which cap, ``idle_s`` when a closed tab's session ends [s]."""
@@ -96,16 +109,17 @@ def starting_page(ahead: int) -> str:
     )
 
 
-def move_html(location: str) -> str:
+def move_html(location: str, nonce: str = "") -> str:
     """The end of the door's page: moves its tab to ``location`` (in place, so Back does not
     reopen the door). A script's navigation is same-site, so the session's SameSite=Strict
     cookie is sent even when the door was opened from a link on another site (a redirect would
-    not send it)."""
+    not send it). ``nonce``: the one the page's Content-Security-Policy allows its script by."""
     target = html.escape(location, quote=True)
     script = json.dumps(location).replace("<", "\\u003c")
     return (
         f"<p><a class='launcher-link' href='{target}'>Open the simulator</a></p>"
-        f"<script>window.location.replace({script});</script></body></html>"
+        f"<script nonce='{html.escape(nonce, quote=True)}'>window.location.replace({script});"
+        "</script></body></html>"
     )
 
 

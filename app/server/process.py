@@ -87,6 +87,9 @@ def run_launcher(args: argparse.Namespace) -> int:
     token = secrets.token_urlsafe(32)
     options = ("--no-preview",) if args.no_preview else ()
     options += ("--frame-memory-mb", f"{args.frame_memory_mb:g}")
+    # a session ends itself after this long without input that changes its scene (the
+    # launcher's own count takes any frame its page sends: a ping, the same value again)
+    options += ("--input-idle-min", f"{args.input_idle_min:g}")
     if args.studies:
         options += ("--studies", os.path.abspath(args.studies))
     origins = tuple(args.public_url)

@@ -18,6 +18,10 @@ from app.server.children import Child
 
 log = logging.getLogger("app.server.launcher")  # the proxy's lines keep their logger's name
 
+# a session's process that has not sent a byte of its answer this long is taken as stuck (a
+# stopped or swapping process): the page gets a 504 instead of waiting for ever [s]
+READ_S = 30.0
+SESSION_ENDED = 4000  # the websocket close code of an ended session (the page says so)
 FRAME_BYTES = security.WS_CHUNK_BYTES + 4096  # one websocket frame: a wslink chunk and its header
 PASSED_HEADERS = (
     "Content-Type",
@@ -42,9 +46,15 @@ def client_session() -> aiohttp.ClientSession:
 
 
 async def http(
-    client: aiohttp.ClientSession, request: web.Request, child: Child, rest: str
+    client: aiohttp.ClientSession,
+    request: web.Request,
+    child: Child,
+    rest: str,
+    read_s: float | None = None,
 ) -> web.Response:
-    """Pass a page's GET or HEAD of ``rest`` to its session's process (its token left out)."""
+    """Pass a page's GET or HEAD of ``rest`` to its session's process (its token left out); a
+    504 if the process sends nothing for ``read_s`` (default ``READ_S``)."""
+    read_s = READ_S if read_s is None else read_s
     query = [(k, v) for k, v in request.query.items() if k != "token"]
     url = f"{child.origin}{_path(rest)}"
     headers = {"Cookie": child.cookie}
@@ -52,11 +62,19 @@ async def http(
         headers["Accept-Encoding"] = request.headers["Accept-Encoding"]
     try:
         async with client.request(
-            request.method, url, params=query, headers=headers, allow_redirects=False
+            request.method,
+            url,
+            params=query,
+            headers=headers,
+            allow_redirects=False,
+            timeout=aiohttp.ClientTimeout(total=None, sock_connect=10, sock_read=read_s),
         ) as answer:
             body = await answer.read()
             passed = {k: answer.headers[k] for k in PASSED_HEADERS if k in answer.headers}
             return web.Response(status=answer.status, body=body, headers=passed)
+    except TimeoutError:
+        log.warning("session process %d sent nothing for %g s", child.pid, read_s)
+        return web.Response(status=504, text="The session's process is not answering\n")
     except (aiohttp.ClientError, OSError) as exc:
         log.warning("session process %d did not answer: %s", child.pid, exc)
         return web.Response(status=502, text="The session's process did not answer\n")
@@ -95,6 +113,9 @@ async def websocket(
         for task in tasks:
             task.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)  # each one's end read, none logged
+        if upstream.closed and upstream.close_code == SESSION_ENDED and not page.closed:
+            # the session ended itself (unused): the page says "session ended"
+            await page.close(code=SESSION_ENDED, message=b"session ended")
     finally:
         child.n_sockets -= 1
         child.pages.discard(page)

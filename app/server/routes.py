@@ -5,6 +5,7 @@ session's and a browser's cookies, and the launcher's root with a request's sett
 
 from __future__ import annotations
 
+import ipaddress
 import re
 from urllib.parse import quote
 
@@ -30,6 +31,33 @@ def navigation_problem(headers) -> str | None:
     if "prefetch" in purpose or "prerender" in purpose or "preview" in purpose:
         return "a prefetch"
     return None
+
+
+def foreign_navigation(headers) -> str | None:
+    """None if a navigation to the door that carries the token only in its cookie comes from
+    the app's own pages or from the browser itself (``Sec-Fetch-Site: same-origin`` or
+    ``none``: the address bar, a bookmark; or no fetch metadata at all), else why not. A page on
+    another port of this machine is same-site: its navigation carries the cookie (cookies ignore
+    ports), and must not start a session."""
+    site = headers.get("Sec-Fetch-Site", "").lower()
+    if site and site not in ("same-origin", "none"):
+        return f"a navigation from a {security.echo(site)} page without the token in its address"
+    return None
+
+
+def client_address(request: web.Request, behind_proxy: bool) -> str:
+    """The address a request comes from: with a reverse proxy configured (``--public-url``),
+    a request from loopback (the proxy) is the client the proxy names last in
+    ``X-Forwarded-For`` (the address it appended: nginx's ``$proxy_add_x_forwarded_for``), if
+    that is an IP address; otherwise the connection's own address."""
+    remote = request.remote or ""
+    if behind_proxy and remote in security.LOOPBACK_NAMES:
+        forwarded = request.headers.get("X-Forwarded-For", "").split(",")[-1].strip()
+        try:
+            return str(ipaddress.ip_address(forwarded))
+        except ValueError:
+            pass
+    return remote
 
 
 def session_cookie(session_id: str) -> str:

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from app.server import connections, index_page
+from app.server import connections, headers, index_page
 from app.server.budget import (
     MAX_MESSAGE_BYTES,
     MIB,
@@ -129,6 +129,7 @@ def install(
 
     def bind(web_app) -> None:
         connections.guard_app(web_app.app)  # idle and partial connections closed
+        headers.install(web_app.app)  # CSP, nosniff, no referrer, no-store pages
         web_app.app.middlewares.append(door.middleware)
         # after the door: the page itself needs the token too
         web_app.app.middlewares.append(index_page.middleware_for(server.state))

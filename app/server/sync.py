@@ -18,7 +18,8 @@ last:
 and ``clear_state_client_cache`` of trame's protocol instance, see ``attach``):
 
 * a client may write only the keys the app declares for it, each value through its screen;
-  anything else is dropped and logged, never stored or forwarded;
+  anything else is dropped and logged, never stored or forwarded (a key with a refusal hook,
+  such as an upload's, also tells the page why: ``refusals``);
 * each page has its own record of what it was sent; a value reaches a page only if it differs
   from that record, and only once the change callbacks have run (a value the controls' validators
   correct is never forwarded raw, and an upload's bytes never leave the server);
@@ -36,6 +37,7 @@ and ``clear_state_client_cache`` of trame's protocol instance, see ``attach``):
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -65,8 +67,15 @@ class ClientStateSync:
         # page -> client key -> values pushed to it since it last sent that key (the newest few)
         self._pushed: dict[str, dict[str, list[bytes]]] = {}
         self._held: set[str] = set()  # keys of a client update being applied
+        # key -> called with a client's value its screen refused, to tell the page why (a value
+        # of no other key is only logged)
+        self.refusals: dict[str, Callable[[Any], None]] = {}
         self.n_dropped = 0
         self.n_echoes = 0
+        # when a page last changed the scene (a value it set that differs from the one held, or
+        # a trigger whose run changed the state): a session's use, as its reaper counts it
+        self.last_change_s = time.monotonic()
+        self.n_pushed_keys = 0  # state keys pushed so far (a trigger's effect is seen by it)
 
     def attach(self, protocol) -> None:
         """Take over trame's state push on its protocol instance (trame-server 4.1.0)."""
@@ -89,6 +98,7 @@ class ClientStateSync:
         """Send each page the modified values it does not hold yet (held keys wait)."""
         values, packed = clean_state(modified_state)
         keys = [k for k in values if k not in self._held]
+        self.n_pushed_keys += len(keys)
         for client_id in self.clients():
             sent = self._sent.setdefault(client_id, {})
             update = {k: values[k] for k in keys if sent.get(k) != packed[k]}
@@ -111,6 +121,8 @@ class ClientStateSync:
         """Store the accepted ``(key, value)`` changes of one page, run the change callbacks, then
         send the resulting values to the pages that do not hold them. Returns what was accepted."""
         accepted, echoes = self._accept(client_id, changes)
+        if any(self.state[key] != value for key, value in accepted.items()):
+            self.last_change_s = time.monotonic()
         held = set(accepted) - self._held
         self._held |= held
         try:
@@ -140,6 +152,9 @@ class ClientStateSync:
             except (ValueError, TypeError, OverflowError) as exc:
                 self.n_dropped += 1
                 log.warning("dropped state %s from a client: %s", echo(key), str(exc)[:200])
+                if key in self.refusals:
+                    with self.state:  # sent now (a state.update alone waits for a flush)
+                        self.refusals[key](raw)
                 continue
             sent[key] = packed  # what the page holds now
             if packed in pushed.get(key, ()):

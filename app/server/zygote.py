@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import ctypes
 import gc
+import logging
 import os
 import signal
 import sys
@@ -77,6 +78,12 @@ def main(argv: list[str] | None = None) -> int:
     args = app_main.parse_args(
         ["--shared", "--token-stdin", "--host", "127.0.0.1", "--port", "0", *options]
     )
+    from app.server import connections  # noqa: PLC0415  (aiohttp: after the version check)
+
+    # the sessions' logs as the launcher's: one short line per refusal or malformed request,
+    # never the request line (it may carry a token) nor a traceback
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    connections.shorten_server_logs()
     import simcore  # noqa: PLC0415
     from app.engine import Engine  # noqa: PLC0415
 
@@ -149,7 +156,10 @@ def _serve(app, args, token: str, budget: int) -> int:
         app.logic.studies.refresh()  # the study folders written since the app was built
         signal.signal(signal.SIGTERM, process.interrupt)
         process.limit_address_space(budget + process.HEADROOM_BYTES)
-        return process.serve_until_stopped(lambda: app.start(args.host, args.port), args)
+        input_idle_s = max(1.0, 60.0 * args.input_idle_min)
+        return process.serve_until_stopped(
+            lambda: app.start(args.host, args.port, input_idle_s=input_idle_s), args
+        )
     except BaseException:  # a session that cannot start says why and exits; never returns
         import traceback  # noqa: PLC0415
 

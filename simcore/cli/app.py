@@ -3,7 +3,7 @@
 lmapd app [--host 127.0.0.1] [--port 8080] [--scene SCENE] [--shared]
           [--max-sessions N] [--memory-cap-mb MB] [--idle-s S] [--input-idle-min MIN]
           [--max-age-h H] [--frame-memory-mb MB] [--public-url URL ...] [--no-spare]
-          [--fork-sessions] [--no-preview] [--studies DIR]
+          [--fork-sessions | --process-sessions] [--no-preview] [--studies DIR]
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     app.add_argument(
         "--input-idle-min",
         type=float,
-        help="a session whose page sends nothing this long ends, open or not [min] (default 30)",
+        help="a session whose page changes nothing this long ends, open or not [min] (default 30)",
     )
     app.add_argument("--max-age-h", type=float, help="a session ends this old [h] (default 8)")
     app.add_argument(
@@ -46,10 +46,17 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
         help="the address a reverse proxy serves the app at (https://NAME); repeatable",
     )
     app.add_argument("--no-spare", action="store_true", help="start no process ahead")
-    app.add_argument(
+    sessions = app.add_mutually_exclusive_group()
+    sessions.add_argument(
         "--fork-sessions",
         action="store_true",
-        help="fork the sessions from one preloaded parent (quicker, less memory; Linux)",
+        help="fork the sessions from one preloaded parent (quicker, less memory; the default "
+        "on Linux)",
+    )
+    sessions.add_argument(
+        "--process-sessions",
+        action="store_true",
+        help="start each session as a process of its own (the default elsewhere)",
     )
     app.add_argument(
         "--no-preview", action="store_true", help="always wait for the preset's frame (no preview)"
@@ -92,5 +99,6 @@ def run_cli(args: argparse.Namespace) -> int:
     argv += ["--shared"] if args.shared else []
     argv += ["--no-spare"] if args.no_spare else []
     argv += ["--fork-sessions"] if args.fork_sessions else []
+    argv += ["--process-sessions"] if args.process_sessions else []
     argv += ["--no-preview"] if args.no_preview else []
     return app_main.main(argv) or 0

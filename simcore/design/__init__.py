@@ -198,16 +198,32 @@ class StudyFolder:
     front: tuple[Record, ...]
     confirmed: tuple[Record, ...]
     winner: Record | None
+    skipped: tuple[str, ...] = ()  # the record files left out, each with why
 
 
 def open_study(out_dir: str | Path) -> StudyFolder:
     """Read a study's output folder (its ``study.toml`` and ``records/``). Raises StudyError
-    naming the folder if it holds no study."""
+    naming the folder if it holds no study; record files that are no record of this study
+    (malformed, or with another count of requirements or costs) are left out and named in
+    ``skipped``."""
     out = Path(out_dir)
     if not (out / STUDY_COPY).is_file():
         raise StudyError(f"{out} holds no study ({STUDY_COPY} is missing)")
     study = load_study(out / STUDY_COPY)
-    records = sorted(load_records(out), key=lambda r: r.number)
+    skipped: list[str] = []
+    records = []
+    for r in load_records(out, skipped):
+        shape = (len(r.margins), len(r.values), len(r.objectives), len(r.points))
+        n_requirements, n_costs = len(study.requirements), len(study.minimize)
+        if shape != (n_requirements, n_requirements, n_costs, len(study.envelope)):
+            skipped.append(
+                f"record {r.number}: {shape[0]} margins, {shape[2]} costs and {shape[3]} "
+                f"envelope points, not this study's {n_requirements}, {n_costs} and "
+                f"{len(study.envelope)}"
+            )
+        else:
+            records.append(r)
+    records.sort(key=lambda r: r.number)
     candidates = [r for r in records if r.stage in ("screen", "polish")]
     front = _front(study, candidates)
     confirmed = [r for r in records if r.stage == "confirm"]
@@ -218,6 +234,7 @@ def open_study(out_dir: str | Path) -> StudyFolder:
         front=tuple(front),
         confirmed=tuple(confirmed),
         winner=_winner(study, front, confirmed),
+        skipped=tuple(skipped),
     )
 
 

@@ -81,16 +81,55 @@ def _key(preset: str, params: Mapping[str, Any]) -> str:
     return preset + " " + json.dumps(params, sort_keys=True)
 
 
-def load_records(out: Path) -> list[Record]:
+_NUMBER_LISTS = ("values", "margins", "objectives")
+
+
+def record_problem(data: Any) -> str | None:
+    """Why ``data`` (a record file's JSON) is not a record's shape, or None."""
+    if not isinstance(data, dict):
+        return f"not an object but {type(data).__name__}"
+    missing = [
+        k for k in ("number", "stage", "preset", "params", "points", "feasible") if k not in data
+    ]
+    missing += [k for k in _NUMBER_LISTS if k not in data]
+    if missing:
+        return f"no {', '.join(missing)}"
+    checks = {
+        "number": isinstance(data["number"], int) and not isinstance(data["number"], bool),
+        "stage": data["stage"] in STAGES,
+        "preset": isinstance(data["preset"], str),
+        "params": isinstance(data["params"], dict),
+        "points": isinstance(data["points"], list)
+        and all(isinstance(p, dict) for p in data["points"]),
+        "feasible": isinstance(data["feasible"], bool),
+        **{
+            key: isinstance(data[key], list)
+            and all(isinstance(v, int | float) and not isinstance(v, bool) for v in data[key])
+            for key in _NUMBER_LISTS
+        },
+    }
+    wrong = [key for key, ok in checks.items() if not ok]
+    return f"{', '.join(wrong)} of the wrong kind" if wrong else None
+
+
+def load_records(out: Path, skipped: list[str] | None = None) -> list[Record]:
+    """The records of a study folder; a file that is no record (a record cut short by a kill:
+    its design runs again) is left out, and named with why in ``skipped`` if given."""
     folder = out / RECORDS_DIR
     if not folder.is_dir():
         return []
     records = []
     for path in sorted(folder.glob("*.json")):
         try:
-            records.append(Record.from_json(json.loads(path.read_text())))
-        except (OSError, ValueError, TypeError):
-            continue  # a record cut short by a kill: its design runs again
+            data = json.loads(path.read_text())
+        except (OSError, ValueError) as exc:
+            problem: str | None = f"not JSON ({type(exc).__name__})"
+        else:
+            problem = record_problem(data)
+        if problem is None:
+            records.append(Record.from_json(data))
+        elif skipped is not None:
+            skipped.append(f"{path.name}: {problem}")
     return records
 
 

@@ -102,3 +102,63 @@ def test_a_page_cannot_name_a_folder_that_is_not_a_listed_study(app, name):
     assert app.state.design_message == "Choose a study from the list."
     app.server.controller.trigger_fn("open_design")(0)
     assert app.state.design_message == "Choose a design of the study drawn above."
+
+
+def _copy_study(source, target) -> None:
+    import shutil
+
+    shutil.copytree(source, target)
+
+
+def test_a_study_folder_or_file_linking_outside_the_studies_folder_is_not_listed(
+    app, studies, tmp_path
+):
+    outside = tmp_path / "outside"
+    _copy_study(studies[0] / "energy", outside)
+    linked = studies[0] / "linked"
+    linked.symlink_to(outside, target_is_directory=True)  # the whole folder elsewhere
+    leaky = studies[0] / "leaky"
+    _copy_study(studies[0] / "energy", leaky)
+    record = next((leaky / "records").iterdir())
+    record.unlink()
+    record.symlink_to(tmp_path / "secret.json")  # one file elsewhere
+    (tmp_path / "secret.json").write_text("{}")
+    try:
+        app.logic.studies.refresh()
+        assert app.state.design_studies == ["energy"]
+        change(app, design_study="linked")
+        assert app.state.design_message == "Choose a study from the list."
+    finally:
+        import shutil
+
+        linked.unlink()
+        shutil.rmtree(leaky)
+        app.logic.studies.refresh()
+
+
+def test_malformed_records_are_left_out_and_each_named_in_one_line(app, studies, caplog):
+    import json
+
+    folder = studies[0] / "damaged"
+    _copy_study(studies[0] / "energy", folder)
+    records = folder / "records"
+    good = json.loads(next(iter(sorted(records.iterdir()))).read_text())
+    (records / "a_list.json").write_text("[1, 2]")
+    (records / "b_strings.json").write_text(json.dumps({**good, "margins": "big", "number": "7"}))
+    (records / "c_counts.json").write_text(json.dumps({**good, "objectives": [1.0, 2.0]}))
+    (records / "d_cut.json").write_text(json.dumps(good)[:40])
+    try:
+        app.logic.studies.refresh()
+        change(app, design_study="damaged")
+        message = app.state.design_message
+        assert "\n" not in message and "Left out 4 malformed records: " in message
+        assert "a_list.json: not an object but list" in message
+        assert "b_strings.json: number, margins of the wrong kind" in message
+        assert "2 costs" in message and "d_cut.json: not JSON" in message
+        assert app.state.design_rows  # the good records are drawn
+        assert not [r for r in caplog.records if r.exc_info]
+    finally:
+        import shutil
+
+        shutil.rmtree(folder)
+        app.logic.studies.refresh()

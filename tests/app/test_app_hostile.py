@@ -9,14 +9,19 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import json
+import re
 import time
 import urllib.error
 import urllib.request
+from pathlib import Path
 
 import aiohttp
 import msgpack
+import psutil
 import pytest
 from support.hostile_client import Client, connect
+from support.hostile_meshes import bufferless_glb, ply_claiming, shared_accessor_glb, stl_claiming
 from support.launch import app_process
 from support.soak import rss_mb
 
@@ -380,3 +385,115 @@ def test_half_open_connections_are_evicted_and_a_page_still_loads(app):
     finally:
         for s in crowd:
             s.close()
+
+
+# -- 6. uploads that would expand, and upload calls of the wrong shape ---------------------------
+def peak_rss_mb(pid: int) -> float:
+    """The highest resident set size ``pid`` has had, in MB (VmHWM)."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    raise RuntimeError(f"no VmHWM for pid {pid}")
+
+
+async def refusal_of(client: Client, **values) -> str:
+    """Send ``values`` and return the upload message the page is then shown."""
+    await client.set_state(upload_error="")
+    start = len(client.states)
+    await client.set_state(**values)  # the message may come before the answer
+    if not any(s.get("upload_error") for s in client.states[start:]):
+        await client.wait_state(lambda s: bool(s.get("upload_error")))
+    return next(s["upload_error"] for s in client.states[start:] if s.get("upload_error"))
+
+
+HOSTILE_UPLOADS = [
+    ({"name": "fleet.glb", "content": bufferless_glb()}, "accessor 0 declares 900,000 elements"),
+    ({"name": "fleet.glb", "content": shared_accessor_glb(400, 3000)}, "1,200,000 triangles"),
+    ({"name": "big.ply", "content": ply_claiming(10**9, 10**9)}, "25,000,000,000 bytes of data"),
+    ({"name": "big.stl", "content": stl_claiming(2**31)}, "does not match the triangle count"),
+]
+WRONG_SHAPES = [
+    ({"upload_scale": [1, 2]}, "scale a list of 2 items is not a number; kept the previous"),
+    ({"upload_file": [{"name": "a.stl", "content": b"x"}] * 2}, "one mesh file at a time"),
+    ({"upload_file": {"name": "a.stl", "content": "solid a"}}, "came as text, not as the file"),
+    ({"upload_file": "box.stl"}, "not a file upload ('box.stl')"),
+    ({"upload_file": {"name": "a.stl"}}, "could not read the file"),
+]
+
+
+async def upload_attack(open_page, pid: int) -> tuple[list[str], float, dict]:
+    """Every hostile upload and wrong-shaped call through one page (``open_page()``: a new
+    connected Client): (the messages, the growth of the peak memory of process ``pid`` in MB,
+    the state a new page then reads)."""
+    page = await open_page()
+    before = peak_rss_mb(pid)
+    messages = []
+    for upload, _ in HOSTILE_UPLOADS:
+        messages.append(await refusal_of(page, upload_file={**upload, "size": 1}))
+    for values, _ in WRONG_SHAPES:
+        messages.append(await refusal_of(page, **values))
+    growth = peak_rss_mb(pid) - before
+    await page.ws.close()
+    fresh = await open_page()  # the server still serves
+    state = (await fresh.call("trame.state.get"))["result"]["state"]
+    await fresh.ws.close()
+    return messages, growth, state
+
+
+def assert_refused_one_line_each(messages: list[str]) -> None:
+    expected = [text for _, text in HOSTILE_UPLOADS + WRONG_SHAPES]
+    for message, text in zip(messages, expected, strict=True):
+        assert text in message and "\n" not in message, (text, message)
+    assert all(m.startswith("Upload refused: ") for m in messages[: len(HOSTILE_UPLOADS)])
+
+
+def test_hostile_uploads_and_wrong_shaped_calls_are_refused_in_one_line_the_server_alive(app):
+    """--shared: one process for every page, so an upload that expanded would take them all."""
+    messages, growth, state = run(
+        lambda session: upload_attack(lambda: connect(session, app), app.pid)
+    )
+    assert_refused_one_line_each(messages)
+    assert growth < 100, growth  # the 400-mesh file alone: 5.6 GB once expanded
+    assert state["upload_scale"] == 1.0 and not state["upload_busy"]
+
+
+def test_hostile_uploads_are_refused_in_a_launchers_session_which_stays_alive(tmp_path):
+    """Launcher mode: the same uploads and calls through a session's page (the session forked
+    from the launcher's preloaded parent, as by default)."""
+    options = ("--max-sessions", "1", "--no-spare")
+    with app_process(log_path=tmp_path / "server.log", sessions=True, app_args=options) as running:
+
+        async def attack(session: aiohttp.ClientSession):
+            navigation = {"Sec-Fetch-Mode": "navigate", "Sec-Fetch-Dest": "document"}
+            url = running.url + "&pixels=32"
+            async with session.get(url, headers=navigation, allow_redirects=False) as answer:
+                assert answer.status == 200
+                jar = {k: m.value for k, m in answer.cookies.items()}
+                page = await answer.text()
+            path = json.loads(re.search(r"location\.replace\((\"[^\"]*\")\)", page)[1])
+            headers = {
+                "Origin": running.origin,
+                "Cookie": "; ".join(f"{k}={v}" for k, v in jar.items()),
+            }
+            ws_address = f"ws://127.0.0.1:{running.port}{path.split('?')[0]}ws"
+
+            async def open_page() -> Client:
+                ws = await session.ws_connect(ws_address, headers=headers, max_msg_size=0)
+                client = Client(ws)
+                assert "result" in await client.hello()
+                return client
+
+            probe = await open_page()  # the session listens: find its process
+            await probe.ws.close()
+            newest = max(psutil.Process(running.pid).children(recursive=True), key=_started)
+            return await upload_attack(open_page, newest.pid), newest.pid
+
+        (messages, growth, state), session_pid = run(attack)
+        assert_refused_one_line_each(messages)
+        assert growth < 100, growth
+        assert state["upload_scale"] == 1.0 and not state["upload_busy"]
+        assert psutil.pid_exists(running.pid) and psutil.Process(session_pid).is_running()
+
+
+def _started(process: psutil.Process) -> float:
+    return process.create_time()

@@ -9,6 +9,7 @@ or SIGKILL. Every wait is bounded and only catches hangs; no test asserts a wall
 
 from __future__ import annotations
 
+import argparse
 import asyncio
 import concurrent.futures
 import contextlib
@@ -22,6 +23,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 import urllib.parse
 from pathlib import Path
@@ -35,6 +37,7 @@ from support.fork import require_fork
 from support.hostile_client import Client
 from support.launch import app_process
 
+from app.logic import upload_folders
 from app.server import connections, proxy
 from app.server import launcher as lau
 
@@ -58,10 +61,10 @@ def run(coroutine_fn, *args):
 
 
 @contextlib.asynccontextmanager
-async def serving(the_caps: lau.Caps):
+async def serving(the_caps: lau.Caps, **options):
     """A launcher with stand-in sessions on a free port, behind its connection guard:
-    (launcher, base address, client)."""
-    launcher = lau.Launcher(TOKEN, "127.0.0.1", the_caps, command=fake_command)
+    (launcher, base address, client); ``options``: the Launcher's own (``origins``)."""
+    launcher = lau.Launcher(TOKEN, "127.0.0.1", the_caps, command=fake_command, **options)
     runner = web.AppRunner(launcher.web_app(), access_log=None)
     await runner.setup()
     server, sweeper, port = await connections.listen(runner, launcher.guard, "127.0.0.1", 0)
@@ -286,6 +289,63 @@ def test_only_a_tabs_navigation_starts_a_session(headers):
     run(body)
 
 
+@pytest.mark.parametrize(
+    ("site", "token_in_address", "starts"),
+    [
+        ("same-site", False, False),  # a page on another port of 127.0.0.1 (cookies ignore ports)
+        ("cross-site", False, False),
+        ("same-site", True, True),  # whoever holds the printed address may start one
+        ("same-origin", False, True),  # a link of the app's own pages
+        ("none", False, True),  # the address bar, a bookmark, a reload
+        (None, False, True),  # a client that sends no fetch metadata
+    ],
+)
+def test_the_token_cookie_alone_starts_a_session_only_from_the_apps_own_pages(
+    site, token_in_address, starts
+):
+    async def body():
+        async with serving(caps(spare=False)) as (launcher, base, client):
+            headers = {**NAVIGATION, **({"Sec-Fetch-Site": site} if site else {})}
+            if not token_in_address:
+                headers.update(cookie(base))
+            url = f"{base}/?token={TOKEN}" if token_in_address else f"{base}/?pixels=32"
+            async with client.get(url, allow_redirects=False, headers=headers) as answer:
+                text = await answer.text()
+                status = answer.status
+            await until(lambda: launcher.n_starting == 0, "the door to finish")
+            return status, text, len(launcher.sessions)
+
+    status, text, n_sessions = run(body)
+    if starts:
+        assert (status, n_sessions) == (200, 1) and "/s/" in text
+    else:
+        assert (status, n_sessions) == (403, 0) and "/s/" not in text
+        assert "Open the address that lmapd app printed" in text and "href='/?pixels=32'" in text
+
+
+def test_every_answer_carries_the_security_headers_and_the_doors_script_its_nonce():
+    async def body():
+        async with serving(caps(spare=False)) as (_, base, client):
+            url = f"{base}/?token={TOKEN}"
+            async with client.get(url, allow_redirects=False, headers=NAVIGATION) as answer:
+                door, page = dict(answer.headers), await answer.text()
+            refused = (await get(client, f"{base}/?token=wrong"))[2]
+            missing = (await get(client, f"{base}/s/nope/", **cookie(base)))[2]
+            return door, page, refused, missing
+
+    door, page, refused, missing = run(body)
+    nonce = re.search(r"<script nonce='([^']+)'>window\.location\.replace", page)[1]
+    policy = door["Content-Security-Policy"]
+    assert f"'nonce-{nonce}'" in policy.split("; ")[1]  # script-src
+    assert "frame-ancestors 'none'" in policy and "connect-src 'self' ws://127.0.0.1:" in policy
+    assert door["Cache-Control"] == "no-store"
+    for headers in (door, refused, missing):
+        assert headers["X-Content-Type-Options"] == "nosniff"
+        assert headers["Referrer-Policy"] == "no-referrer" and headers["X-Frame-Options"] == "DENY"
+        assert "default-src 'self'" in headers["Content-Security-Policy"]
+    assert "nonce" not in refused["Content-Security-Policy"]  # a nonce only where it is used
+
+
 def test_an_unknown_session_or_a_path_out_of_it_gets_a_page_not_a_trace():
     async def body():
         async with serving(caps()) as (_, base, client):
@@ -405,6 +465,33 @@ def test_a_burst_of_page_loads_counts_starting_sessions_at_their_size():
     run(body)
 
 
+@pytest.mark.parametrize("behind_proxy", [True, False], ids=["proxy", "no-proxy"])
+def test_behind_a_configured_proxy_the_address_cap_counts_the_forwarded_address(behind_proxy):
+    """Every student arrives from the proxy's loopback address: with --public-url the cap is
+    kept per forwarded address; without one the header is not believed (loopback: no cap)."""
+    options = {"origins": ("https://lab.example",)} if behind_proxy else {}
+
+    async def body():
+        async with serving(caps(per_address=1, spare=False, max_sessions=5), **options) as (
+            launcher,
+            base,
+            client,
+        ):
+            statuses = []
+            for forwarded in ("10.0.0.5", "10.0.0.5", "198.51.100.7, 10.0.0.6", "10.0.0.5"):
+                headers = {"X-Forwarded-For": forwarded}
+                status, _, _ = await open_door(client, base, "", **headers)
+                statuses.append(status)
+                await until(lambda: launcher.n_starting == 0, "the door to finish")
+            return statuses, sorted(c.address for c in launcher.sessions.values())
+
+    statuses, addresses = run(body)
+    if behind_proxy:
+        assert statuses == [200, 503, 200, 503] and addresses == ["10.0.0.5", "10.0.0.6"]
+    else:
+        assert statuses == [200] * 4 and addresses == ["127.0.0.1"] * 4
+
+
 def test_a_browser_holds_at_most_its_share_of_sessions():
     async def body():
         the_caps = caps(max_sessions=6, per_client=2, spare=False)
@@ -506,11 +593,17 @@ def test_idle_sessions_end_and_dead_ones_are_forgotten_and_close_stops_all():
             )
             victim = launcher.sessions[dies.id]
             idle_child = launcher.sessions[idle.id]
+            left = Path(tempfile.gettempdir()) / f"{upload_folders.PREFIX}{victim.pid}-test"
+            left.mkdir()  # the dead session's uploads
+            (left / "upload-1.glb").write_bytes(b"x")
+            other = Path(tempfile.mkdtemp(prefix=f"{upload_folders.PREFIX}{os.getpid()}-"))
             # from now on; the page that never connected is given connect_s
             launcher.caps = dataclasses.replace(launcher.caps, idle_s=0.3, connect_s=0.3)
             os.kill(victim.pid, signal.SIGKILL)
             await until(lambda: len(launcher.sessions) == 1, "the idle and the dead session")
             assert launcher.n_reaped == 1 and idle_child.proc.returncode is not None
+            assert not left.exists() and other.is_dir()  # only the dead one's folder removed
+            other.rmdir()
             status, text, _ = await get(client, f"{base}{idle.path}", **idle.headers(base))
             assert status == 404 and "No such session" in text
             assert (await get(client, f"{base}{kept.path}", **kept.headers(base)))[0] == 200
@@ -521,6 +614,29 @@ def test_idle_sessions_end_and_dead_ones_are_forgotten_and_close_stops_all():
         assert pids and not any(psutil.pid_exists(p) and _running(p) for p in pids)
 
     run(body)
+
+
+def test_a_stopped_sessions_page_gets_a_504_after_the_read_timeout_not_a_hang(monkeypatch):
+    monkeypatch.setattr(proxy, "READ_S", 0.5)
+
+    async def body():
+        async with serving(caps(spare=False)) as (launcher, base, client):
+            session = await new_session(client, base)
+            child = launcher.sessions[session.id]
+            assert (await get(client, f"{base}{session.path}", **session.headers(base)))[0] == 200
+            os.kill(child.pid, signal.SIGSTOP)
+            try:
+                stuck = await asyncio.wait_for(
+                    get(client, f"{base}{session.path}", **session.headers(base)), WAIT_S
+                )
+            finally:
+                os.kill(child.pid, signal.SIGCONT)
+            again = await get(client, f"{base}{session.path}", **session.headers(base))
+            return stuck, again
+
+    (status, text, _), again = run(body)
+    assert status == 504 and "not answering" in text
+    assert again[0] == 200
 
 
 def test_a_page_still_loading_keeps_its_session_past_the_idle_time_until_connect_s():
@@ -694,12 +810,12 @@ OPEN_FILES = 1024  # a common default soft limit
 
 
 @contextlib.contextmanager
-def launcher_process(tmp_path: Path, *args: str):
-    """The launcher with stand-in sessions in a process limited to 1,024 open files (soft and
-    hard): (its address with the token, its log file)."""
+def launcher_process(tmp_path: Path, *args: str, open_files: int = OPEN_FILES):
+    """The launcher with stand-in sessions in a process limited to ``open_files`` open files
+    (soft and hard): (its address with the token, its log file)."""
 
     def limit() -> None:
-        resource.setrlimit(resource.RLIMIT_NOFILE, (OPEN_FILES, OPEN_FILES))
+        resource.setrlimit(resource.RLIMIT_NOFILE, (open_files, open_files))
 
     log_path = tmp_path / "launcher.log"
     with open(log_path, "wb") as log_file:
@@ -765,6 +881,76 @@ def test_a_thousand_half_open_connections_do_not_stop_a_page_load(tmp_path):
         assert "Too many open files" not in log and "Traceback" not in log
 
 
+@pytest.mark.slow
+def test_half_open_floods_from_five_addresses_leave_files_for_a_page_load(tmp_path):
+    """Five addresses (127.0.0.1 to .5, five computers to the launcher), each under its
+    per-address cap, together past the launcher's open-file limit (512 here): the launcher keeps
+    its reserve (closing the longest-idle connections), a page load goes through, and no "Too
+    many open files" is logged."""
+    connections.raise_open_file_limit()  # this process holds the client ends
+    open_files, per_address = 512, 110  # 550 in all, each address under PER_ADDRESS
+    if resource.getrlimit(resource.RLIMIT_NOFILE)[0] < 5 * per_address + 200:
+        skip_unless_ci("this process may not open 750 files")
+    launcher = launcher_process(tmp_path, "--guard-idle-s", "30", open_files=open_files)
+    with launcher as (url, log_path):
+        parts = urllib.parse.urlsplit(url)
+        held = []
+        try:
+            for i in range(1, 6):
+                for _ in range(per_address):
+                    s = socket.socket()
+                    s.bind((f"127.0.0.{i}", 0))
+                    s.settimeout(WAIT_S)
+                    s.connect((parts.hostname, parts.port))
+                    s.sendall(b"GET / HTTP/1.1\r\nHost: x\r\nX-Slow: ")
+                    held.append(s)
+
+            async def body():
+                async with aiohttp.ClientSession(cookie_jar=aiohttp.DummyCookieJar()) as client:
+                    async with client.get(url, headers=NAVIGATION) as answer:
+                        return answer.status, await answer.text()
+
+            status, text = run(lambda: asyncio.wait_for(body(), WAIT_S))
+            assert status == 200 and "/s/" in text
+            closed = sum(1 for s in held if _closed_by_peer(s, time.monotonic() + 0.01))
+            assert closed >= 5 * per_address - open_files + connections.FD_RESERVE
+        finally:
+            for s in held:
+                s.close()
+    log = log_path.read_text()
+    assert "Too many open files" not in log and "Traceback" not in log
+    assert "open files near the limit" in log
+
+
+def test_failed_accepts_log_one_line_a_second_without_a_traceback(caplog):
+    now = [0.0]
+    accepts = connections._AcceptErrors(
+        connections.ShortLog(logging.getLogger("asyncio"), 1, 1.0, clock=lambda: now[0])
+    )
+    logger = logging.getLogger("asyncio")
+    logger.addFilter(accepts)
+    error = OSError(24, "Too many open files")
+    try:
+        with caplog.at_level(logging.WARNING, logger="asyncio"):
+            for step in range(300):  # 3 s of retries, 100 a second
+                now[0] = step / 100
+                try:
+                    raise error
+                except OSError:
+                    logger.error("socket.accept() out of system resource", exc_info=True)
+            logger.error("another asyncio error")
+    finally:
+        logger.removeFilter(accepts)
+    lines = [r.getMessage() for r in caplog.records]
+    assert lines[0] == "could not accept a connection (Too many open files)"
+    assert (
+        lines[1:3]
+        == ["could not accept a connection (Too many open files) (99 more like it not logged)"] * 2
+    )
+    assert lines[3:] == ["another asyncio error"]
+    assert not any(r.exc_info for r in caplog.records[:3])
+
+
 def _closed_by_peer(s: socket.socket, deadline: float) -> bool:
     try:
         s.settimeout(max(0.01, deadline - time.monotonic()))
@@ -824,6 +1010,39 @@ def test_lmapd_app_passes_the_session_and_proxy_options_on(monkeypatch):
     assert given.public_url == ["https://a.example", "https://b.example:8443"]
 
 
+def _options(parser) -> set[str]:
+    return {
+        flag
+        for action in parser._actions  # argparse keeps no public list of its options
+        if action.help != argparse.SUPPRESS
+        for flag in action.option_strings
+        if flag.startswith("--")
+    }
+
+
+def test_lmapd_app_python_m_app_and_the_serving_docs_name_the_same_flags():
+    import app.main as app_main
+    from simcore.cli import app as cli_app
+
+    sub = argparse.ArgumentParser().add_subparsers()
+    lmapd_app = _options(cli_app.add_parser(sub))
+    python_m_app = set()
+    original = argparse.ArgumentParser.parse_args
+    try:  # the parser app.main builds, read as it parses
+        argparse.ArgumentParser.parse_args = lambda self, argv=None: (
+            python_m_app.update(_options(self)) or original(self, [])
+        )
+        app_main.parse_args([])
+    finally:
+        argparse.ArgumentParser.parse_args = original
+    assert lmapd_app == python_m_app, lmapd_app ^ python_m_app
+    root = Path(__file__).resolve().parents[2]
+    text = " ".join((root / "docs" / name).read_text() for name in ("serving.md", "app.md"))
+    named = set(re.findall(r"`(?:lmapd app [^`]*?)?(--[a-z][a-z-]+)", text))
+    others = {"--set", "--moved", "--no-browser-settle", "--vs-no-preview"}  # other commands'
+    assert named - others <= lmapd_app, (named - others) - lmapd_app
+
+
 def test_refusals_are_logged_a_few_a_window_and_the_held_back_ones_counted(caplog):
     import logging
 
@@ -877,3 +1096,123 @@ def test_processes_sharing_a_pipe_print_whole_lines():
     broken = [line for line in lines if not whole.match(line)]
     assert not broken, broken[:3]
     assert len(lines) == n_procs * n_lines
+
+
+MALFORMED = [  # each sent alone on a fresh connection, the launcher's token in its request line
+    "GET /?token={t} HTTP/1.1\r\nHost: x\r\nContent-Length: nope\r\n\r\n",
+    "GET /?token={t}\x01 HTTP/1.1\r\nHost: x\r\n\r\n",
+    "GET /?token={t} HTTP/1.1\r\nHost: x\r\nBad Header\r\n\r\n",
+    "G@T /?token={t} HTTP/1.1\r\nHost: x\r\n\r\n",
+    "GET /?token={t} HTTP/9.9\r\nHost: x\r\n\r\n",
+    "GET /?token={t} HTTP/1.1\r\nHost: x\r\nX-Long: " + "a" * 70_000 + "\r\n\r\n",
+    "POST /?token={t} HTTP/1.1\r\nHost: x\r\nTransfer-Encoding: chunked\r\n\r\nzz\r\n",
+    "POST /?token={t} HTTP/1.1\r\nHost: x\r\nContent-Length: 3\r\nContent-Length: 4\r\n\r\nabc",
+    "GET /?token={t} HTTP/1.1\r\nHost: x\r\nX-Nul: a\x00b\r\n\r\n",
+    "GET /?token={t}%ff%fe HTTP/1.1\r\nHost: x\r\n\r\n",
+    "GET /ws?token={t} HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+    "Sec-WebSocket-Version: 13\r\nSec-WebSocket-Key: short\r\n\r\n",
+    "GET /?token={t} HTTP/1.1\r\nHost: x\r\nTransfer-Encoding: gzip, chunked, x\r\n\r\n",
+]
+
+
+def _listening_port(pid: int) -> int:
+    ports = [
+        c.laddr.port for c in psutil.Process(pid).net_connections("tcp") if c.status == "LISTEN"
+    ]
+    assert len(ports) == 1, ports
+    return ports[0]
+
+
+@pytest.mark.slow
+def test_a_sessions_own_port_refuses_malformed_requests_and_sockets_in_one_line_each(tmp_path):
+    """The 12 malformed requests, and a websocket and a page without the session's secret,
+    straight to a forked session's loopback port: each refused, one short line each at most,
+    never a traceback or the launcher's token."""
+    require_fork()
+    options = ("--max-sessions", "1", "--no-spare")
+    log_path = tmp_path / "server.log"
+    with app_process(log_path=log_path, sessions=True, app_args=options) as running:
+
+        async def body():
+            async with aiohttp.ClientSession() as client:
+                url = running.url + "&pixels=32"
+                async with client.get(url, headers=NAVIGATION, allow_redirects=False) as answer:
+                    assert answer.status == 200
+                    await answer.text()
+                session = max(_descendants(running.pid), key=lambda p: p.create_time())
+                port = _listening_port(session.pid)
+                base = f"http://127.0.0.1:{port}"
+                page = (await get(client, f"{base}/?token={running.token}"))[0]
+                try:
+                    await client.ws_connect(f"ws://127.0.0.1:{port}/ws", headers={"Origin": base})
+                    socket_status = 101
+                except aiohttp.WSServerHandshakeError as exc:
+                    socket_status = exc.status
+                return port, page, socket_status
+
+        n_lines_before = len(log_path.read_text().splitlines())
+        port, page_status, socket_status = run(body)
+        assert (page_status, socket_status) == (403, 403)
+        for request in MALFORMED:
+            with socket.create_connection(("127.0.0.1", port), timeout=WAIT_S) as s:
+                s.sendall(request.format(t=running.token).encode("latin-1"))
+                s.settimeout(WAIT_S)
+                with contextlib.suppress(ConnectionResetError):
+                    assert s.recv(1024).split(b" ")[1] in (b"400", b"403", b"404", b"405", b"413")
+        time.sleep(0.5)  # the last lines reach the log
+    lines = log_path.read_text().splitlines()[n_lines_before:]
+    text = "\n".join(lines)
+    assert running.token not in text and "Traceback" not in text, text[-3000:]
+    assert len(lines) <= len(MALFORMED) + 2, text[-3000:]
+
+
+@pytest.mark.slow
+def test_a_session_whose_input_changes_nothing_ends_at_its_input_idle_time(tmp_path):
+    """Two forked sessions whose pages send something every half second, with a 6 s input idle
+    time: one sends only what changes nothing (its pitch again, a trigger with no effect, a
+    state read), and ends; the other moves its pitch, and stays."""
+    require_fork()
+    options = ("--max-sessions", "2", "--no-spare", "--input-idle-min", "0.1")
+    log_path = tmp_path / "server.log"
+    with app_process(log_path=log_path, sessions=True, app_args=options) as running:
+
+        async def open_page(client) -> Client:
+            url = running.url + "&pixels=32"
+            async with client.get(url, headers=NAVIGATION, allow_redirects=False) as answer:
+                jar = {k: m.value for k, m in answer.cookies.items()}
+                path = json.loads(MOVE.search(await answer.text())[1]).split("?")[0]
+            ws = await client.ws_connect(
+                f"ws://127.0.0.1:{running.port}{path}ws",
+                headers={
+                    "Origin": running.origin,
+                    "Cookie": "; ".join(f"{k}={v}" for k, v in jar.items()),
+                },
+                max_msg_size=0,
+            )
+            page = Client(ws)
+            assert "result" in await page.hello()
+            return page
+
+        async def body():
+            async with aiohttp.ClientSession() as client:
+                started = time.monotonic()  # before the session starts
+                idle, busy = await open_page(client), await open_page(client)
+                for step in range(int(WAIT_S * 2)):
+                    await asyncio.sleep(0.5)
+                    try:
+                        await idle.set_state(pitch_deg=0)  # the value it holds
+                        await idle.call("trame.trigger", ["unpin_frame", [], {}])  # none pinned
+                        await idle.call("trame.state.get")
+                    except ConnectionError as exc:
+                        ended_s, why = time.monotonic() - started, str(exc)
+                        break
+                    await busy.set_state(pitch_deg=1 + step % 2)
+                else:
+                    raise AssertionError("the unused session did not end")
+                alive = "result" in await busy.call("trame.state.get")
+                await busy.ws.close()
+                return ended_s, why, alive
+
+        ended_s, why, alive = run(body)
+        assert 6 <= ended_s < 6 + 10, ended_s  # its idle time, the reaper's round and a margin
+        assert str(lau.SESSION_ENDED) in why and alive

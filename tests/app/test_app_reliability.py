@@ -306,7 +306,7 @@ def test_upload_caps_size_faces_scale_and_shape(app, monkeypatch):
     assert "uploads are limited to 32 MiB" in app.state.upload_error
     monkeypatch.setattr(upload_mod, "MAX_UPLOAD_FACES", 10)
     upload(app, box_stl())
-    assert "the mesh has 12 triangles; the limit is 10" in app.state.upload_error
+    assert "the .stl file declares 12 triangles; the limit is 10" in app.state.upload_error
     monkeypatch.undo()
     change(app, upload_scale="lots")
     assert "scale 'lots' is not a number" in app.state.upload_error

@@ -297,20 +297,19 @@ def pose_errors(estimate: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
 
 
 def _predict(previous: list[tuple[float, np.ndarray]], t_s: float) -> np.ndarray:
-    """The seed at ``t_s``: the last good estimate moved on by the last step's motion (in the
-    sensor frame, scaled to the time step), or the last estimate if there is one only."""
+    """The seed at ``t_s``: the last good estimate moved on at the last step's rates (its
+    rotation's, in the sensor frame, and its centre's velocity), scaled to the time step; the
+    last estimate itself if there is one only."""
     t1, pose1 = previous[-1]
     if len(previous) < 2:
         return pose1
     t0, pose0 = previous[-2]
-    step = pose1 @ np.linalg.inv(pose0)  # the motion from t0 to t1, sensor frame
     scale = (t_s - t1) / (t1 - t0) if t1 > t0 else 1.0
-    moved = np.eye(4)
-    moved[:3, :3] = Rotation.from_rotvec(
-        Rotation.from_matrix(step[:3, :3]).as_rotvec() * scale
-    ).as_matrix()
-    moved[:3, 3] = step[:3, 3] * scale
-    return moved @ pose1
+    turn = Rotation.from_matrix(pose1[:3, :3] @ pose0[:3, :3].T).as_rotvec() * scale
+    seed = np.eye(4)
+    seed[:3, :3] = Rotation.from_rotvec(turn).as_matrix() @ pose1[:3, :3]
+    seed[:3, 3] = pose1[:3, 3] + scale * (pose1[:3, 3] - pose0[:3, 3])
+    return seed
 
 
 def _lost(reg: Registration) -> bool:

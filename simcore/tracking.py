@@ -369,6 +369,7 @@ def track(
         for name, value in zip(
             out,
             (reg.pose, rot_deg, tra_m, reg.fitness, reg.n_points, lost, reg.method, reg.seconds),
+            strict=True,
         ):
             out[name].append(value)
     return TrackResult(

@@ -11,8 +11,8 @@ come from :func:`global_register`, as does a frame whose seeded registration fai
 ``GLOBAL_HYPOTHESES`` attitudes spread evenly over the rotation group (a seeded draw), each placed
 so that the seen side's centroid lies on the cloud's, the best by fitness kept.
 
-A frame is LOST (``lost_rule``) when fewer than ``min_points`` points take part, or when under
-``min_fitness`` of the frame's points end within the final correspondence distance of the model:
+A frame is LOST (``lost_rule``) when fewer than ``MIN_POINTS`` points take part, or when under
+``MIN_FITNESS`` of the frame's points end within 1 % of the model's radius of a model point:
 its estimate is kept in the table but never seeds the next frame. Errors are against the ground
 truth (``trajectory.GroundTruth``): the rotation angle of R_est^T R_true [deg] and the distance
 between the estimated and the true target centre [m].
@@ -38,18 +38,23 @@ __all__ = [
     "Registration",
     "TrackResult",
     "global_register",
+    "is_lost",
     "model_points",
     "register",
     "track",
 ]
 
-MODEL_POINTS = 20_000  # [-] points sampled on the mesh (MRO: about 10 cm apart)
+MODEL_POINTS = 60_000  # [-] points sampled on the mesh (MRO: about 6 cm apart)
 MIN_POINTS = 30  # [-] fewer points than this in a frame: lost
 MIN_FITNESS = 0.5  # [-] a smaller share of the points near the model after registration: lost
 GLOBAL_HYPOTHESES = 96  # [-] start attitudes of the global registration
 _FINE_FRACTION = 0.01  # [-] final correspondence distance / model radius (MRO: 8.5 cm)
 _COARSE_FRACTION = 0.06  # [-] first correspondence distance / model radius (MRO: 0.5 m)
 _GLOBAL_FRACTION = 0.15  # [-] correspondence distance of the global search / radius
+_EDGE_ON_DEG = 5.0  # [deg] faces turned less than this away from the lidar are kept
+_ITERATIONS = 60  # [-] GICP iterations of a pass at most
+_ROTATION_EPSILON_RAD = 1e-5  # [rad] GICP's convergence: an update below this (and below...)
+_TRANSLATION_EPSILON_M = 1e-5  # [m] ... this) ends it (small_gicp's default 0.1 deg stops short)
 _GLOBAL_VOXEL_FRACTION = 0.03  # [-] voxel of the global search's clouds / radius
 
 
@@ -73,10 +78,13 @@ class ModelCloud:
 
     def seen_from(self, pose: np.ndarray) -> np.ndarray:
         """(m, 3) the points whose faces look towards the lidar when the target is at ``pose``
-        (4, 4) T_sensor_target (back faces culled; no occlusion)."""
+        (4, 4) T_sensor_target, or turn less than ``_EDGE_ON_DEG`` away (back faces culled, those
+        seen edge-on kept: a seed a degree off must not drop a panel seen edge-on; no
+        occlusion)."""
         lidar_m = -pose[:3, :3].T @ pose[:3, 3]
-        facing = np.einsum("ij,ij->i", self.normals, lidar_m - self.points_m) > 0.0
-        return self.points_m[facing]
+        to_lidar = lidar_m - self.points_m
+        cos = np.einsum("ij,ij->i", self.normals, to_lidar) / np.linalg.norm(to_lidar, axis=1)
+        return self.points_m[cos > -np.sin(np.radians(_EDGE_ON_DEG))]
 
 
 def model_points(model: Any, n: int = MODEL_POINTS, seed: int = 0) -> ModelCloud:
@@ -103,37 +111,50 @@ class Registration:
     method: str
 
 
-def _align(source_m, target_m, seed, distance_m, voxel_m, iterations) -> tuple[np.ndarray, float]:
+def _align(
+    source_m, target_m, seed, distances_m, voxel_m, iterations, fitness_m
+) -> tuple[np.ndarray, float]:
     """GICP of ``source_m`` (sensor frame) onto ``target_m`` (body frame) from ``seed``
-    (T_sensor_target); the estimate and its fitness over the downsampled source."""
+    (T_sensor_target), one pass per correspondence distance of ``distances_m`` on the same
+    preprocessed clouds; the estimate and its fitness: the share of the source's points within
+    ``fitness_m`` of a target point."""
     import small_gicp  # noqa: PLC0415
 
     target, tree = small_gicp.preprocess_points(target_m, downsampling_resolution=voxel_m)
     source, _ = small_gicp.preprocess_points(source_m, downsampling_resolution=voxel_m)
-    result = small_gicp.align(
-        target,
-        source,
-        tree,
-        init_T_target_source=np.linalg.inv(seed),
-        registration_type="GICP",
-        max_correspondence_distance=distance_m,
-        max_iterations=iterations,
-    )
-    fitness = result.num_inliers / max(source.size(), 1)
-    return np.linalg.inv(result.T_target_source), float(fitness)
+    body_from_sensor = np.linalg.inv(seed)
+    for distance_m in distances_m:
+        result = small_gicp.align(
+            target,
+            source,
+            tree,
+            init_T_target_source=body_from_sensor,
+            registration_type="GICP",
+            max_correspondence_distance=distance_m,
+            max_iterations=iterations,
+            rotation_epsilon=_ROTATION_EPSILON_RAD,
+            translation_epsilon=_TRANSLATION_EPSILON_M,
+        )
+        body_from_sensor = result.T_target_source
+    moved = source_m @ body_from_sensor[:3, :3].T + body_from_sensor[:3, 3]
+    _, sq_dist = tree.batch_nearest_neighbor_search(moved)
+    fitness = float(np.mean(np.asarray(sq_dist) <= fitness_m**2))
+    return np.linalg.inv(body_from_sensor), fitness
 
 
 def register(points_m: np.ndarray, model: ModelCloud, seed: np.ndarray) -> Registration:
     """Register a frame's points (n, 3) [m, sensor frame] to ``model`` from ``seed`` (4, 4)
-    T_sensor_target: a coarse pass, then a fine one, each on the side seen from its start."""
+    T_sensor_target: on the side seen from the seed, GICP passes at correspondence distances of
+    6 %, 1 % and 0.5 % of the model's radius; the fitness at 1 %."""
     start = time.perf_counter()
     points = np.ascontiguousarray(points_m, dtype=np.float64)
     if len(points) < MIN_POINTS:
         return Registration(seed, 0.0, len(points), time.perf_counter() - start, "too few")
     radius = model.radius_m
-    voxel = 0.002 * radius
-    pose, _ = _align(points, model.seen_from(seed), seed, _COARSE_FRACTION * radius, voxel, 30)
-    pose, fitness = _align(points, model.seen_from(pose), pose, _FINE_FRACTION * radius, voxel, 30)
+    passes = (_COARSE_FRACTION * radius, _FINE_FRACTION * radius, 0.5 * _FINE_FRACTION * radius)
+    pose, fitness = _align(
+        points, model.seen_from(seed), seed, passes, 0.002 * radius, _ITERATIONS, passes[1]
+    )
     return Registration(pose, fitness, len(points), time.perf_counter() - start, "tracked")
 
 
@@ -163,9 +184,10 @@ def global_register(
             points,
             coarse.seen_from(pose),
             pose,
-            _GLOBAL_FRACTION * radius,
+            (_GLOBAL_FRACTION * radius,),
             _GLOBAL_VOXEL_FRACTION * radius,
             15,
+            _GLOBAL_FRACTION * radius,
         )
         if fitness > best[0]:
             best = (fitness, estimate)
@@ -233,8 +255,8 @@ class TrackResult:
     methods: tuple[str, ...]
     registration_s: np.ndarray
     lost_rule: str = field(
-        default=f"fewer than {MIN_POINTS} points, or under {MIN_FITNESS:g} of them within the "
-        "final correspondence distance (1 % of the model's radius) of the model"
+        default=f"fewer than {MIN_POINTS} points, or under {MIN_FITNESS:g} of them within 1 % "
+        "of the model's radius of a model point once registered"
     )
 
     @property
@@ -312,7 +334,7 @@ def _predict(previous: list[tuple[float, np.ndarray]], t_s: float) -> np.ndarray
     return seed
 
 
-def _lost(reg: Registration) -> bool:
+def is_lost(reg: Registration) -> bool:
     """The lost rule: too few points, or too few of them near the model."""
     return reg.n_points < MIN_POINTS or reg.fitness < MIN_FITNESS
 
@@ -323,6 +345,7 @@ def track(
     truth: GroundTruth,
     n_model_points: int = MODEL_POINTS,
     seed: int = 0,
+    cloud_model: ModelCloud | None = None,
 ) -> TrackResult:
     """Track the target's pose over ``clouds`` (one ``PointCloud`` per frame, sensor frame).
 
@@ -338,12 +361,15 @@ def track(
         Points sampled on the mesh.
     seed : int
         Seed of the model's samples and of the global search's attitudes.
+    cloud_model : ModelCloud, optional
+        The model's points, if already sampled (then ``n_model_points`` is not used).
 
     Returns
     -------
     TrackResult
     """
-    cloud_model = model_points(model, n_model_points, seed)
+    if cloud_model is None:
+        cloud_model = model_points(model, n_model_points, seed)
     true_poses = truth.matrices
     previous: list[tuple[float, np.ndarray]] = []  # (t, estimate) of the frames not lost
     out: dict[str, list] = {k: [] for k in ("pose", "rot", "tra", "fit", "n", "lost", "m", "s")}
@@ -353,14 +379,14 @@ def track(
         reg = None
         if previous:
             reg = register(points, cloud_model, _predict(previous, t_s))
-        if reg is None or (_lost(reg) and reg.n_points >= MIN_POINTS):  # (re-)acquire
+        if reg is None or (is_lost(reg) and reg.n_points >= MIN_POINTS):  # (re-)acquire
             spent = reg.seconds if reg is not None else 0.0
             reg = global_register(points, cloud_model, seed=seed)
             if spent:
                 reg = Registration(
                     reg.pose, reg.fitness, reg.n_points, reg.seconds + spent, "reacquired"
                 )
-        lost = _lost(reg)
+        lost = is_lost(reg)
         if lost:
             previous.clear()  # the next frame starts again with no prior
         else:

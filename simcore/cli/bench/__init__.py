@@ -2,13 +2,14 @@
 preset's time against its error (``tradeoff``), with ``--startup`` the phases of ``lmapd simulate``
 in fresh processes (``startup``), with ``--design`` a design study's wall time (``design``), with
 ``--kernel`` the compiled echo kernel against the numpy path in fresh processes (``kernel``), with
-``--sweep`` a sweep's wall time on Dask clusters of 1 and 2 workers (``sweep``).
+``--sweep`` a sweep's wall time on Dask clusters of 1 and 2 workers (``sweep``), with ``--track``
+the pose track's errors and cost against the targets of issue 40 (``track``).
 
     lmapd bench [--quick] [--json FILE] [--tradeoff --out DIR [--pixels N] | --startup |
                 --design [--trials N] [--workers N] |
                 --kernel [--rounds N] [--repeats N] [--before DIR] |
                 --sweep [--frames N] [--pixels N] [--workers N ...] [--backends B ...]
-                        [--repeats N]]
+                        [--repeats N] | --track]
 
 The modules load the imaging chain; they are imported when the command runs, not at ``--help``.
 The benchmarks that need a browser or a served app stay scripts (``scripts/bench_app.py``,
@@ -56,6 +57,12 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
         "--sweep",
         action="store_true",
         help="a sweep's wall time on Dask clusters of 1 and 2 workers (the best of the rounds)",
+    )
+    bench.add_argument(
+        "--track",
+        action="store_true",
+        help="the pose track's errors on the Table 3 fly-around and on 2 km -> 20 m approaches "
+        "(pixels, pulse energy), its cost against the frame's",
     )
     bench.add_argument("--trials", type=int, help="designs to screen for --design")
     bench.add_argument(
@@ -107,6 +114,7 @@ def run_cli(args: argparse.Namespace) -> int:
         "--design": args.design,
         "--kernel": args.kernel,
         "--sweep": args.sweep,
+        "--track": args.track,
     }
     chosen = [name for name, on in modes.items() if on]
     if len(chosen) > 1:
@@ -134,6 +142,10 @@ def run_cli(args: argparse.Namespace) -> int:
             repeats=args.repeats or (1 if args.quick else 3),
             json_path=args.json,
         )
+    if args.track:
+        from . import track  # noqa: PLC0415  (the imaging chain, the registration)
+
+        return track.main(quick=args.quick, json_path=args.json)
     if args.startup:
         from . import startup  # noqa: PLC0415
 
@@ -155,6 +167,7 @@ OPTIONS = {
     "--design": ("trials", "workers"),
     "--kernel": ("rounds", "repeats", "before"),
     "--sweep": ("frames", "pixels", "workers", "backends", "repeats"),
+    "--track": (),
 }
 
 

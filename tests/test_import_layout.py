@@ -269,8 +269,15 @@ SIMCORE_FLOORS = (
         # kinds and the receivers' sections
         "simcore.plugins",
     ),
-    # the scene, the orbits and the Sun, what a stage is, the pulse
-    ("simcore.scene", "simcore.orbit", "simcore.sun", "simcore.stage", "simcore.pulse"),
+    # the scene, the orbits and the Sun, the trajectories' poses, what a stage is, the pulse
+    (
+        "simcore.scene",
+        "simcore.orbit",
+        "simcore.sun",
+        "simcore.trajectory",
+        "simcore.stage",
+        "simcore.pulse",
+    ),
     # the chain's physics up to each pixel's detections: target, rays and hits, echo, background
     # light, the receivers (their declarations and their physics)
     (
@@ -290,6 +297,8 @@ SIMCORE_FLOORS = (
     (
         "simcore.sweep",
         "simcore.flyaround",
+        "simcore.tracking",
+        "simcore.bag",
         "simcore.compare",
         "simcore.reproduce",
         "simcore.design",

@@ -78,14 +78,10 @@ def _header(types: Any, ns: int, frame: str) -> Any:
 def _point_cloud(types: Any, ns: int, cloud: Any) -> Any:
     rows = cloud_array(cloud)
     field = types["sensor_msgs/msg/PointField"]
+    layout: dict[str, Any] = dict(rows.dtype.fields or {})
     fields = [
-        field(
-            name=name,
-            offset=rows.dtype.fields[name][1],
-            datatype=_DATATYPES[rows.dtype[name].str[1:]],
-            count=1,
-        )
-        for name in rows.dtype.names
+        field(name=name, offset=offset, datatype=_DATATYPES[dtype.str[1:]], count=1)
+        for name, (dtype, offset, *_) in layout.items()
     ]
     return types["sensor_msgs/msg/PointCloud2"](
         header=_header(types, ns, SENSOR_FRAME),

@@ -211,6 +211,7 @@ def run_cli(args: argparse.Namespace) -> int:
             keep_clouds=bool(args.track or bag),
         )
         tracked = _track(result, out) if args.track else None
+        assert result.truth is not None  # run_flyaround always sets it
         write_csv(out / POSES_NAME, POSE_COLUMNS, result.truth.rows())
         record = result.to_json()
         if tracked is not None:

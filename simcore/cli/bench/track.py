@@ -32,11 +32,11 @@ TRANSLATION_MARK_M = 0.10
 SUCCESS_DEG, SUCCESS_M = 5.0, 0.2  # the spacecraft pose estimators' success rule
 SUCCESS_RANGE_M = (20.0, 120.0)
 DOCKING_M = 0.01  # a flash-lidar docking breadboard's position error at the end
-APPROACH = {
+APPROACH_DURATION_S = 99.0  # [s] 100 frames at 1 Hz, 20 m apart
+APPROACH: dict[str, Any] = {
     "trajectory.kind": "approach",
     "trajectory.start_range_m": 2000.0,
     "trajectory.end_range_m": 20.0,
-    "trajectory.duration_s": 99.0,
     "trajectory.frame_rate_hz": 1.0,
     "trajectory.tumble_rate_deg_s": 1.0,
     "trajectory.tumble_axis": [0.0, 0.0, 1.0],
@@ -127,7 +127,7 @@ def main(quick: bool = False, json_path: str | None = None) -> int:
     if not quick:
         figures["flyaround"].append(_flyaround(256))
     grid = [(64, 5e-3)] if quick else [(32, 5e-3), (64, 5e-3), (128, 5e-3), (64, 0.5e-3)]
-    duration_s = 19.0 if quick else APPROACH["trajectory.duration_s"]
+    duration_s = 19.0 if quick else APPROACH_DURATION_S
     figures["approach"] = [_approach(p, e, duration_s) for p, e in grid]
     if not quick:
         figures["docking"] = _docking()

@@ -34,7 +34,11 @@ on 2026-11-26 for the Monte Carlo's new noise draw (one stream per pixel, white 
 second sample: docs/physics.md#mc-noise-draw): the montecarlo case's draws change (its counts
 move by a few: 7 -> 12 outliers, 14 -> 19 dropped), and through the gross-error tables the Monte
 Carlo makes, the paper and oblique cases' gross errors (one fewer in the oblique case; range sums
-within 0.4 m of 1.7e6 m); the Monte Carlo's statistical tests are the guard.
+within 0.4 m of 1.7e6 m); the Monte Carlo's statistical tests are the guard. On 2026-12-02 the
+scene's new ``[trajectory]`` section (its defaults) was added to every case's summary, and the
+fly-around's ground truth (``truth`` per frame, ``trajectory``, ``conventions``): those entries
+only, from a run on another machine whose every other figure agreed with these within RTOL (the
+point clouds unchanged).
 
 Regenerate only for a change that is meant to alter results, and say so in its commit:
 

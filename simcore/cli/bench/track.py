@@ -58,6 +58,19 @@ def _holds(tracked, rot_deg: float, tra_m: float) -> np.ndarray:
     )
 
 
+def _longest_run(flags: np.ndarray) -> tuple[int, int] | None:
+    """(start, stop) of the longest run of True in ``flags``, None if there is none."""
+    best, start = None, None
+    for i, flag in enumerate([*flags.tolist(), False]):
+        if flag and start is None:
+            start = i
+        elif not flag and start is not None:
+            if best is None or i - start > best[1] - best[0]:
+                best = (start, i)
+            start = None
+    return best
+
+
 def _flyaround(pixels: int) -> dict[str, Any]:
     fly, tracked = _run({"pixels": pixels}, flyaround_times(300.0, PAPER_PERIOD_S))
     s = tracked.summary()
@@ -80,9 +93,16 @@ def _approach(pixels: int, energy_j: float, duration_s: float) -> dict[str, Any]
     keys["trajectory.duration_s"] = duration_s
     _, tracked = _run(keys)
     holds = _holds(tracked, ROTATION_MARK_DEG, TRANSLATION_MARK_M)
-    # the farthest range from which every frame to the end holds
+    # the farthest range from which every frame to the end holds, and the longest held stretch
     tail = np.flip(np.logical_and.accumulate(np.flip(holds)))
     from_m = float(tracked.range_m[tail].max()) if tail.any() else None
+    stretch = _longest_run(holds)
+    span = (
+        f"longest held stretch {tracked.range_m[stretch[0]]:.0f} -> "
+        f"{tracked.range_m[stretch[1] - 1]:.0f} m"
+        if stretch
+        else "no frame held"
+    )
     lo, hi = SUCCESS_RANGE_M
     near = (tracked.range_m >= lo) & (tracked.range_m <= hi)
     success = _holds(tracked, SUCCESS_DEG, SUCCESS_M)[near]
@@ -90,8 +110,9 @@ def _approach(pixels: int, energy_j: float, duration_s: float) -> dict[str, Any]
     say(
         f"  approach 2 km -> 20 m, {pixels:>3} px, {energy_j * 1e3:g} mJ: holds {held} "
         f"({int(holds.sum())}/{len(holds)} frames within {ROTATION_MARK_DEG:g} deg and "
-        f"{TRANSLATION_MARK_M:g} m); success rule ({SUCCESS_M:g} m, {SUCCESS_DEG:g} deg) at "
-        f"{lo:g}-{hi:g} m: {int(success.sum())}/{len(success)} frames; median registration "
+        f"{TRANSLATION_MARK_M:g} m; {span}); success rule ({SUCCESS_M:g} m, "
+        f"{SUCCESS_DEG:g} deg) at {lo:g}-{hi:g} m: {int(success.sum())}/{len(success)} "
+        "frames; median registration "
         f"{np.median(tracked.registration_s):.3f} s"
     )
     return {
@@ -99,6 +120,10 @@ def _approach(pixels: int, energy_j: float, duration_s: float) -> dict[str, Any]
         "pulse_energy_j": energy_j,
         "holds_from_m": from_m,
         "frames_held": int(holds.sum()),
+        "range_m": tracked.range_m.tolist(),
+        "held": holds.tolist(),
+        "rotation_error_deg": tracked.rotation_error_deg.tolist(),
+        "translation_error_m": tracked.translation_error_m.tolist(),
         "frames": len(holds),
         "success_frames": int(success.sum()),
         "success_of": len(success),

@@ -7,7 +7,8 @@ culled) is the target of the registration, the frame's points (outliers included
 not know them) its source. The seed of a frame is the previous estimate moved on by the last
 step's motion (constant velocity, in the sensor frame); the first frame, and any after a lost one,
 come from :func:`global_register`, as does a frame whose seeded registration fails the lost rule
-(re-acquired, in the same frame). The global registration does not use the truth: GICP started from
+twice, from the prediction and then re-centred on the cloud's centroid (re-acquired, in the same
+frame). The global registration does not use the truth: GICP started from
 ``GLOBAL_HYPOTHESES`` attitudes spread evenly over the rotation group (a seeded draw), each placed
 so that the seen side's centroid lies on the cloud's, the best by fitness kept.
 
@@ -238,8 +239,9 @@ class TrackResult:
     lost : (n,) bool
         Frames the rule (``lost_rule``) flags.
     methods : tuple of str
-        ``global`` (no prior), ``tracked`` (seeded by the previous estimate), ``reacquired``
-        (seeded, failed the rule, then global) or ``too few``.
+        ``global`` (no prior), ``tracked`` (seeded by the previous estimate), ``recentred``
+        (the seed's centre moved onto the cloud's, after the prediction failed the rule),
+        ``reacquired`` (both failed, then global) or ``too few``.
     registration_s : (n,) float
         Wall time of each registration [s].
     """
@@ -334,6 +336,17 @@ def _predict(previous: list[tuple[float, np.ndarray]], t_s: float) -> np.ndarray
     return seed
 
 
+def _recentred(seed: np.ndarray, points_m: np.ndarray, model: ModelCloud) -> np.ndarray:
+    """``seed`` with its translation moved so that the seen side's centroid lands on the frame's
+    (the rotation kept): the second try of a seeded frame whose centre moved more than the
+    prediction knew (an approach's second frame, seeded by the first alone)."""
+    seen = model.seen_from(seed)
+    out = seed.copy()
+    if len(seen):
+        out[:3, 3] += points_m.mean(axis=0) - (seed[:3, :3] @ seen.mean(axis=0) + seed[:3, 3])
+    return out
+
+
 def is_lost(reg: Registration) -> bool:
     """The lost rule: too few points, or too few of them near the model."""
     return reg.n_points < MIN_POINTS or reg.fitness < MIN_FITNESS
@@ -378,7 +391,17 @@ def track(
         points = np.asarray(cloud.points, dtype=np.float64)
         reg = None
         if previous:
-            reg = register(points, cloud_model, _predict(previous, t_s))
+            predicted = _predict(previous, t_s)
+            reg = register(points, cloud_model, predicted)
+            if is_lost(reg) and reg.n_points >= MIN_POINTS:  # the prediction's centre off
+                again = register(points, cloud_model, _recentred(predicted, points, cloud_model))
+                reg = Registration(
+                    again.pose,
+                    again.fitness,
+                    again.n_points,
+                    again.seconds + reg.seconds,
+                    "recentred",
+                )
         if reg is None or (is_lost(reg) and reg.n_points >= MIN_POINTS):  # (re-)acquire
             spent = reg.seconds if reg is not None else 0.0
             reg = global_register(points, cloud_model, seed=seed)

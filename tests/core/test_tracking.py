@@ -119,3 +119,20 @@ def test_a_seeded_frame_follows_the_motion_of_the_last_two(model, mro):
     assert np.all(result.rotation_error_deg < ROT_TOL_DEG)
     assert np.all(result.translation_error_m < TRA_TOL_M)
     assert len(result.rows()) == 3 and len(result.rows()[0]) == len(tracking.TRACK_COLUMNS)
+
+
+@pytest.mark.slow
+def test_a_frame_whose_centre_jumped_is_recentred_on_its_cloud_not_lost(model, mro, cloud):
+    # the second frame of an approach is seeded by the first alone: 15 m closer, the seed's
+    # centre is off by far more than the correspondence distance
+    closer = TRUE_POSE.copy()
+    closer[2, 3] -= 15.0
+    view = tracking.model_points(mro, 4000, seed=13)
+    second = view.seen_from(closer) @ closer[:3, :3].T + closer[:3, 3]
+    result = tracking.track(
+        [as_cloud(cloud), as_cloud(second)], mro, truth_of([TRUE_POSE, closer]), cloud_model=model
+    )
+    assert result.methods == ("global", "recentred")
+    assert not result.lost.any()
+    assert result.rotation_error_deg[1] < ROT_TOL_DEG
+    assert result.translation_error_m[1] < TRA_TOL_M

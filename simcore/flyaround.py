@@ -10,6 +10,13 @@ writes ``frames/frame_000_t00000s.ply`` ... (one point cloud per frame, sensor f
 the per-frame records. The ``lmapd flyaround`` command (``simcore.cli.flyaround``) adds the JSON
 record and the plot of the paper's Figure 7.
 
+The scene's ``[trajectory]`` section chooses the relative motion (``simcore.trajectory``): the
+orbits (the default, below), an approach along the line of sight or a hold at one range, each with
+an optional tumble of the target. Every frame's ground truth (``FlyaroundResult.truth``: the
+target's pose in the sensor frame and the lidar's in the target frame, the Sun's direction) goes
+into its record, and ``FlyaroundResult.track`` registers the clouds to the model
+(``simcore.tracking``) when the frames were kept (``keep_clouds=True``).
+
 The orbits are Table 3's (``target``, ``imaging``) or, when the scene gives them
 (``orbit.target_tle``, ``orbit.imaging_tle``), two TLEs propagated by SGP4, so real satellite
 pairs can be imaged. Each frame's time since ``orbit.epoch_utc`` goes into its scene
@@ -36,11 +43,14 @@ import numpy as np
 from numpy.typing import ArrayLike
 from tqdm import tqdm
 
-from . import io, orbit
+from . import io, orbit, trajectory
 from .materials import MATERIAL_NAMES
 from .orbit import PAPER_IMAGING, PAPER_TARGET, Elements, RelativePose
+from .orbit.inputs import time_array
 from .pipeline import Pipeline, Result
+from .pointcloud import PointCloud
 from .scene import Scene, with_overrides
+from .trajectory import GroundTruth
 
 __all__ = [
     "DEFAULT_INTERVAL_S",
@@ -92,6 +102,25 @@ class FlyaroundResult:
     target_credit: str
     wall_s: float
     tles: tuple[str, str] | None = None
+    truth: GroundTruth | None = None
+    clouds: tuple[PointCloud, ...] = ()
+    target_model: Any = None
+
+    @property
+    def kind(self) -> str:
+        """The trajectory's kind: orbit, approach or hold (``trajectory.kind``)."""
+        return self.scene.trajectory.kind
+
+    def track(self, **options: Any) -> Any:
+        """Register each frame's cloud to the target's model (``simcore.tracking.track``);
+        needs the clouds (``run_flyaround(..., keep_clouds=True)``). ``options``: those of
+        ``tracking.track``. Returns its ``TrackResult``."""
+        from . import tracking  # noqa: PLC0415  (the registration library)
+
+        if not self.clouds:
+            raise ValueError("track() needs the clouds: run_flyaround(..., keep_clouds=True)")
+        assert self.truth is not None
+        return tracking.track(self.clouds, self.target_model, self.truth, **options)
 
     def pose_series(self, t_s) -> RelativePose:
         """The relative pose at the times ``t_s`` [s] from the same orbits (TLEs or elements)."""
@@ -123,8 +152,11 @@ class FlyaroundResult:
         figures over the imaged frames only.
         """
         d = self.pose.distance_m
-        if self.tles is None:
-            orbits: dict[str, Any] = {
+        if self.kind != "orbit":
+            orbits: dict[str, Any] = {}
+            stats = {"min_m": float(d.min()), "mean_m": float(d.mean()), "max_m": float(d.max())}
+        elif self.tles is None:
+            orbits = {
                 "target": dataclasses.asdict(self.target),
                 "imaging": dataclasses.asdict(self.imaging),
             }
@@ -140,6 +172,8 @@ class FlyaroundResult:
         return {
             "scene": self.scene.to_dict(),
             "j2": self.j2,
+            "trajectory": dataclasses.asdict(self.scene.trajectory),
+            "conventions": trajectory.CONVENTIONS,
             "interval_s": self.interval_s,
             "n_frames": len(self.records),
             "orbits": orbits,
@@ -164,13 +198,14 @@ def frame_filename(index: int, t_s: float) -> str:
 
 def run_flyaround(
     scene: Scene,
-    times_s: ArrayLike,
+    times_s: ArrayLike | None = None,
     target: Elements = PAPER_TARGET,
     imaging: Elements = PAPER_IMAGING,
     j2: bool = False,
     out_dir: str | Path | None = None,
     progress: bool = True,
     pipeline: Pipeline | None = None,
+    keep_clouds: bool = False,
 ) -> FlyaroundResult:
     """Image the target at each time of a fly-around.
 
@@ -178,9 +213,12 @@ def run_flyaround(
     ----------
     scene : Scene
         The lidar and target; its pose (pitch, azimuth, roll, quaternion, distance) is replaced in
-        each frame by the orbits' relative pose. Every frame uses ``scene.seed``.
-    times_s : (n,) float
-        Imaging times since the orbits' common epoch [s] (e.g. ``orbit.flyaround_times()``).
+        each frame by the trajectory's (``scene.trajectory``: the orbits, an approach or a hold,
+        with the target's tumble). Every frame uses ``scene.seed``.
+    times_s : (n,) float, optional
+        Imaging times since the epoch [s] (e.g. ``orbit.flyaround_times()``); None: those of the
+        trajectory (approach, hold: ``trajectory.frame_times``; orbit: every
+        ``DEFAULT_INTERVAL_S`` over one period of the target).
     target, imaging : Elements
         Orbits of the target (nadir-pointing) and of the imaging satellite (tracking lidar).
     j2 : bool
@@ -193,6 +231,9 @@ def run_flyaround(
     pipeline : Pipeline, optional
         The pipeline to run the frames through (reuse one to keep the loaded mesh); a new one if
         None.
+    keep_clouds : bool
+        Keep every frame's point cloud in the result (``FlyaroundResult.clouds``; for
+        ``track`` and the bag).
 
     Returns
     -------
@@ -203,29 +244,46 @@ def run_flyaround(
     OrbitError
         Invalid times (empty, not finite) or orbits.
     SceneError, TargetError
-        From the pipeline, e.g. a mesh that cannot be loaded.
+        From the pipeline, e.g. a mesh that cannot be loaded, or an approach that ends inside the
+        target (refused before the first frame).
     """
     start = time.perf_counter()
     tles = None
     if scene.orbit.target_tle:  # real satellites: SGP4 states; their osculating elements
         tles = (scene.orbit.target_tle, scene.orbit.imaging_tle)
         target, imaging = (_osculating(scene, which) for which in ("target", "imaging"))
+    if times_s is None:
+        times_s = (
+            orbit.flyaround_times(DEFAULT_INTERVAL_S, target.period_s)
+            if scene.trajectory.kind == "orbit"
+            else trajectory.frame_times(scene)
+        )
     pose = _pose_series(scene, target, imaging, times_s, j2)
+    pipeline = pipeline if pipeline is not None else Pipeline()
+    if scene.trajectory.kind != "orbit":  # before any frame: not into the target
+        from .target import load_target  # noqa: PLC0415
+
+        trajectory.check_trajectory_target(scene, load_target(scene.target).surface.radius_m)
     from . import sun  # noqa: PLC0415  (the ephemeris: the Sun at each frame)
 
     suns = sun.orbit_sun_geometry(scene, pose.t_s, j2=j2)
+    truth = trajectory.ground_truth(scene, pose, np.array([g.direction_body for g in suns]))
+    truth_records = truth.records()
     folder = None if out_dir is None else Path(out_dir)
     if folder is not None:
         folder.mkdir(parents=True, exist_ok=True)
-    pipeline = pipeline if pipeline is not None else Pipeline()
     records: list[dict[str, Any]] = []
+    clouds = []
     bar = tqdm(
         total=len(pose.t_s), desc="fly-around", unit="frame", file=sys.stderr, disable=not progress
     )
     with bar:
         for i in range(len(pose.t_s)):
             record, result = _image_frame(scene, pose, i, pipeline, folder, suns[i], j2)
+            record["truth"] = truth_records[i]
             records.append(record)
+            if keep_clouds:
+                clouds.append(result.cloud)
             bar.set_postfix_str(f"{record['distance_m']:.0f} m, {record['n_points']} points")
             bar.update()
     return FlyaroundResult(
@@ -239,6 +297,9 @@ def run_flyaround(
         target_credit=result.target.credit,
         wall_s=time.perf_counter() - start,
         tles=tles,
+        truth=truth,
+        clouds=tuple(clouds),
+        target_model=result.target if keep_clouds else None,
     )
 
 
@@ -261,15 +322,31 @@ def pose_series(scene: Scene, times_s: ArrayLike, j2: bool = False) -> RelativeP
 
 
 def _pose_series(scene: Scene, target: Elements, imaging: Elements, t_s, j2: bool):
-    """The relative pose at ``t_s`` [s]: SGP4 states of the scene's TLEs, else the elements."""
-    if not scene.orbit.target_tle:
-        return orbit.relative_pose_series(target, imaging, t_s, j2=j2)
-    from .sun import satellite_states  # noqa: PLC0415
+    """The pose at ``t_s`` [s] of the scene's trajectory: the line of sight (approach, hold),
+    else the SGP4 states of the scene's TLEs or the elements; the target's attitude on top."""
+    kind = scene.trajectory.kind
+    if kind != "orbit":
+        t = time_array(t_s, allow_empty=False)
+        base = trajectory.line_of_sight_poses(scene, t)
+    elif not scene.orbit.target_tle:
+        base = orbit.relative_pose_series(target, imaging, t_s, j2=j2)
+    else:
+        from .sun import satellite_states  # noqa: PLC0415
 
-    t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
-    r_t, v_t = satellite_states(scene, "target", t)
-    r_i, v_i = satellite_states(scene, "imaging", t)
-    return orbit.relative_pose_from_states(t, r_t, v_t, r_i, v_i)
+        t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
+        r_t, v_t = satellite_states(scene, "target", t)
+        r_i, v_i = satellite_states(scene, "imaging", t)
+        base = orbit.relative_pose_from_states(t, r_t, v_t, r_i, v_i)
+    if kind == "orbit" and not _turned(scene):
+        return base  # the orbits' own series, bit for bit
+    return trajectory.with_attitude(base, trajectory.attitude_offsets(scene, base.t_s))
+
+
+def _turned(scene: Scene) -> bool:
+    """Whether the target's attitude differs from its trajectory frame's (a tumble or an initial
+    attitude other than the identity)."""
+    tr = scene.trajectory
+    return tr.tumble_rate_deg_s != 0.0 or tuple(tr.initial_quaternion_wxyz) != (1.0, 0, 0, 0)
 
 
 def _image_frame(

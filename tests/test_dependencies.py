@@ -88,9 +88,21 @@ def third_party_imports(folder: str) -> dict[str, str]:
     return found
 
 
+def module_providers() -> dict[str, list[str]]:
+    """Top-level module -> the distributions that provide it: ``packages_distributions`` plus the
+    single-file extension modules it misses on Python 3.11 (``small_gicp.cpython-311-....so`` at
+    the top of a wheel without top_level.txt reads there as a module named up to ``.so``)."""
+    providers = {k: list(v) for k, v in metadata.packages_distributions().items()}
+    for dist in metadata.distributions():
+        for f in dist.files or ():
+            if len(f.parts) == 1 and f.name.endswith((".so", ".pyd")):
+                providers.setdefault(f.name.split(".")[0], []).append(dist.metadata["Name"])
+    return providers
+
+
 def undeclared(folder: str, *groups: str) -> list[str]:
     """The imports of ``folder`` that no distribution declared by ``groups`` provides."""
-    providers = metadata.packages_distributions()
+    providers = module_providers()
     allowed = declared(*groups)
     missing = []
     for module, where in sorted(third_party_imports(folder).items()):

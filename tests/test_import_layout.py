@@ -270,8 +270,15 @@ SIMCORE_FLOORS = (
         # kinds and the receivers' sections
         "simcore.plugins",
     ),
-    # the scene, the orbits and the Sun, what a stage is, the pulse
-    ("simcore.scene", "simcore.orbit", "simcore.sun", "simcore.stage", "simcore.pulse"),
+    # the scene, the orbits and the Sun, the trajectories' poses, what a stage is, the pulse
+    (
+        "simcore.scene",
+        "simcore.orbit",
+        "simcore.sun",
+        "simcore.trajectory",
+        "simcore.stage",
+        "simcore.pulse",
+    ),
     # the chain's physics up to each pixel's detections: target, rays and hits, echo, background
     # light, the receivers (their declarations and their physics)
     (
@@ -292,6 +299,8 @@ SIMCORE_FLOORS = (
         "simcore.sweep",
         "simcore.atlas",
         "simcore.flyaround",
+        "simcore.tracking",
+        "simcore.bag",
         "simcore.compare",
         "simcore.reproduce",
         "simcore.design",

@@ -1,13 +1,16 @@
-"""``lmapd flyaround``: image the target over the Table 3 fly-around; a PLY per frame, the JSON
-record and the plot of the paper's Figure 7.
+"""``lmapd flyaround``: image the target along its trajectory (the Table 3 fly-around, an
+approach or a hold: the scene's ``[trajectory]``); a PLY per frame, the ground truth, the JSON
+record and the plot of the paper's Figure 7; with ``--track`` a pose track scored against the
+truth, with ``--bag`` a ROS 2 bag.
 
     lmapd flyaround [SCENE.toml] [--set NAME=VALUE ...] --out DIR
-                    [--interval-s 300] [--duration-s SECONDS] [--j2]
+                    [--interval-s 300] [--duration-s SECONDS] [--j2] [--track] [--bag FILE.mcap]
 
-writes ``DIR/frame_000_t00000s.ply`` ... (one point cloud per frame, sensor frame), a JSON record
-``DIR/flyaround.json`` and a plot like the paper's Figure 7, ``DIR/flyaround.png``. The frames are
-imaged by the library's ``simcore.flyaround.run_flyaround``; this module adds the command and the
-plot.
+writes ``DIR/frame_000_t00000s.ply`` ... (one point cloud per frame, sensor frame), the true poses
+``DIR/poses.csv``, a JSON record ``DIR/flyaround.json`` and a plot like the paper's Figure 7,
+``DIR/flyaround.png``; ``--track`` adds ``DIR/tracking.csv`` and ``DIR/tracking.png``. The frames
+are imaged by the library's ``simcore.flyaround.run_flyaround``; this module adds the command and
+the plot.
 """
 
 from __future__ import annotations
@@ -26,13 +29,26 @@ if TYPE_CHECKING:
 
     from ..flyaround import FlyaroundResult
 
-__all__ = ["JSON_NAME", "MAX_FRAMES", "PNG_NAME", "add_parser", "plot_flyaround", "run_cli"]
+__all__ = [
+    "JSON_NAME",
+    "MAX_FRAMES",
+    "PNG_NAME",
+    "POSES_NAME",
+    "TRACK_CSV_NAME",
+    "TRACK_PNG_NAME",
+    "add_parser",
+    "plot_flyaround",
+    "run_cli",
+]
 
 DEFAULT_INTERVAL_S = 300.0  # [s] the paper's imaging interval (= flyaround.DEFAULT_INTERVAL_S)
 PAPER_PERIOD_S = 5924.521  # [s] the paper's orbit period (= orbit.PAPER_PERIOD_S; --help text)
 MAX_FRAMES = 10_000  # [-] guard against a mistyped interval (10k frames ~ 20 GB of PLY)
 JSON_NAME = "flyaround.json"
 PNG_NAME = "flyaround.png"
+POSES_NAME = "poses.csv"
+TRACK_CSV_NAME = "tracking.csv"
+TRACK_PNG_NAME = "tracking.png"
 _PLOT_SAMPLES = 721  # [-] samples of the smooth orbit curves drawn under the frame markers
 
 
@@ -133,16 +149,28 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     fly.add_argument(
         "--interval-s",
         type=float,
-        default=DEFAULT_INTERVAL_S,
-        help=f"time between frames [s] (default {DEFAULT_INTERVAL_S:g})",
+        help=f"time between frames of an orbit trajectory [s] (default {DEFAULT_INTERVAL_S:g}; "
+        "approach and hold: trajectory.frame_rate_hz)",
     )
     fly.add_argument(
         "--duration-s",
         type=float,
-        default=PAPER_PERIOD_S,
-        help=f"length of the fly-around [s] (default one orbit, {PAPER_PERIOD_S:g})",
+        help="length of an orbit trajectory [s] (default one orbit, "
+        f"{PAPER_PERIOD_S:g}; approach and hold: trajectory.duration_s)",
     )
     fly.add_argument("--j2", action="store_true", help="propagate with the secular J2 rates")
+    fly.add_argument(
+        "--track",
+        action="store_true",
+        help="register each frame's cloud to the target's model (small_gicp), scored against "
+        "the truth: DIR/tracking.csv and DIR/tracking.png",
+    )
+    fly.add_argument(
+        "--bag",
+        metavar="FILE.mcap",
+        help="also write a ROS 2 bag (MCAP): PointCloud2 per frame, the true /tf and, with "
+        "--track, the estimated pose",
+    )
     fly.set_defaults(func=run_cli)
     return fly
 
@@ -156,24 +184,44 @@ def run_cli(args: argparse.Namespace) -> int:
     from .. import io, orbit  # noqa: PLC0415  (the imaging chain: not at --help time)
     from ..flyaround import run_flyaround  # noqa: PLC0415
     from ..scene import QUICK, load_scene, with_overrides  # noqa: PLC0415
+    from ..trajectory import POSE_COLUMNS  # noqa: PLC0415
+    from .track_plot import write_csv  # noqa: PLC0415
 
     start = time.perf_counter()
-    times_s = _cli_times(args.interval_s, args.duration_s, CliError)
     overrides = parse_sets(args.set)
     for key in overrides:
         if QUICK.get(key, key).startswith("pose."):
             raise CliError(
-                f"--set {key}: the fly-around takes the pose and distance from the orbits; "
+                f"--set {key}: the fly-around takes the pose and distance from its trajectory; "
                 "drop this key"
             )
     scene = with_overrides(load_scene(args.scene), overrides)
+    times_s = _trajectory_times(scene, args)
+    bag = _bag_path(args.bag)
     out = Path(args.out)
     created = _make_folder(out, CliError)
     io.remove_stale_parts(out)  # temporary files of a killed run in this folder
     try:
-        result = run_flyaround(scene, times_s, j2=args.j2, out_dir=out, progress=True)
-        io.write_json(out / JSON_NAME, result.to_json())
+        result = run_flyaround(
+            scene,
+            times_s,
+            j2=args.j2,
+            out_dir=out,
+            progress=True,
+            keep_clouds=bool(args.track or bag),
+        )
+        tracked = _track(result, out) if args.track else None
+        assert result.truth is not None  # run_flyaround always sets it
+        write_csv(out / POSES_NAME, POSE_COLUMNS, result.truth.rows())
+        record = result.to_json()
+        if tracked is not None:
+            record["tracking"] = tracked.summary()
+        io.write_json(out / JSON_NAME, record)
         plot_flyaround(result, out / PNG_NAME)
+        if bag is not None:
+            from ..bag import write_bag  # noqa: PLC0415
+
+            write_bag(bag, result, tracked)
     except orbit.OrbitError as exc:
         _remove_if_empty(created)
         raise CliError(str(exc)) from None
@@ -186,7 +234,61 @@ def run_cli(args: argparse.Namespace) -> int:
         f"(min / mean / max), {int(result.n_points.sum())} points -> {out}/  "
         f"[{time.perf_counter() - start:.1f} s]"
     )
+    if tracked is not None:
+        s = tracked.summary()
+        med = (
+            f"median error {s['rotation_error_deg_median']:.3g} deg, "
+            f"{s['translation_error_m_median']:.3g} m"
+            if s["rotation_error_deg_median"] is not None
+            else "no frame tracked"
+        )
+        say(f"track: {s['n_frames'] - s['n_lost']} of {s['n_frames']} frames held, {med}")
     return 0
+
+
+def _track(result, out: Path):
+    """Track the fly-around; write DIR/tracking.csv and DIR/tracking.png; the TrackResult."""
+    from ..tracking import TRACK_COLUMNS  # noqa: PLC0415
+    from .track_plot import plot_tracking, write_csv  # noqa: PLC0415
+
+    tracked = result.track()
+    write_csv(out / TRACK_CSV_NAME, TRACK_COLUMNS, tracked.rows())
+    plot_tracking(result, tracked, out / TRACK_PNG_NAME)
+    return tracked
+
+
+def _trajectory_times(scene, args: argparse.Namespace):
+    """The frame times: --interval-s and --duration-s for an orbit trajectory, the scene's
+    trajectory.frame_rate_hz and duration_s for an approach or a hold (the flags refused)."""
+    if scene.trajectory.kind == "orbit":
+        return _cli_times(
+            DEFAULT_INTERVAL_S if args.interval_s is None else args.interval_s,
+            PAPER_PERIOD_S if args.duration_s is None else args.duration_s,
+            CliError,
+        )
+    for flag, value in (("--interval-s", args.interval_s), ("--duration-s", args.duration_s)):
+        if value is not None:
+            raise CliError(
+                f"{flag} is for trajectory.kind = orbit; trajectory.kind = "
+                f"{scene.trajectory.kind} takes trajectory.frame_rate_hz and trajectory.duration_s"
+            )
+    from ..trajectory import frame_times  # noqa: PLC0415
+
+    return frame_times(scene)
+
+
+def _bag_path(bag: str | None) -> Path | None:
+    """``--bag``'s file, checked: a .mcap name in an existing, writable folder."""
+    if bag is None:
+        return None
+    path = Path(bag)
+    if path.suffix != ".mcap":
+        raise CliError(f"--bag {bag!r}: give a file name ending in .mcap")
+    if path.is_dir():
+        raise CliError(f"--bag {bag!r} is a folder")
+    if not path.parent.is_dir() or not os.access(path.parent, os.W_OK | os.X_OK):
+        raise CliError(f"--bag {bag!r}: its folder does not exist or is not writable")
+    return path
 
 
 def _cli_times(interval_s: float, duration_s: float, error: type[Exception]) -> np.ndarray:

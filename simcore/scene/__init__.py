@@ -29,6 +29,7 @@ from .sections import (
     EARTH_RADIUS_M,
     MAX_FILTER_WIDTH_M,
     MAX_STOPS,
+    MAX_TRAJECTORY_FRAMES,
     PAPER_FORMS,
     QUICK,
     RECEIVER_SECTIONS,
@@ -48,6 +49,7 @@ from .sections import (
     Sun,
     Target,
     Timing,
+    Trajectory,
     TransmitOptics,
 )
 from .validation import (
@@ -71,6 +73,7 @@ __all__ = [
     "MAX_GATE_SAMPLES",
     "MAX_SAMPLES_PER_PULSE",
     "MAX_STOPS",
+    "MAX_TRAJECTORY_FRAMES",
     "MESH_SUFFIXES",
     "MIN_TIME_STEP_S",
     "PAPER_FORMS",
@@ -100,6 +103,7 @@ __all__ = [
     "Sun",
     "Target",
     "Timing",
+    "Trajectory",
     "TransmitOptics",
     "auto_time_step_s",
     "builtin_scenes",

@@ -27,6 +27,7 @@ from .sections import (
     Sun,
     Target,
     Timing,
+    Trajectory,
     TransmitOptics,
 )
 
@@ -71,6 +72,7 @@ class SceneKeys:
     sun: Sun = field(default_factory=Sun)
     orbit: Orbit = field(default_factory=Orbit)
     background: Background = field(default_factory=Background)
+    trajectory: Trajectory = field(default_factory=Trajectory)
     # the receivers' own sections (``[gm]``: ``simcore.plugins.registry``), those set to other
     # than their defaults as (name, keys) pairs in name order; read as attributes (``scene.gm``)
     receiver_sections: tuple[tuple[str, Any], ...] = ()

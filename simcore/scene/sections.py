@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 from ..plugins import registry
 from .fields import key
+from .trajectory_section import MAX_TRAJECTORY_FRAMES as MAX_TRAJECTORY_FRAMES
+from .trajectory_section import Trajectory
 
 
 @dataclass(frozen=True)
@@ -411,6 +413,7 @@ _SHARED_SECTIONS = {
     "sun": Sun,
     "orbit": Orbit,
     "background": Background,
+    "trajectory": Trajectory,
 }
 _LAST_SECTIONS = {"quality": Quality}
 

@@ -14,7 +14,7 @@ from ..orbit.tle import check_tle
 from ..plugins import registry
 from .fields import check_fields
 from .keys import SceneKeys
-from .sections import SECTIONS
+from .sections import MAX_TRAJECTORY_FRAMES, SECTIONS
 
 MIN_TIME_STEP_S = 1e-11  # [s] the finest waveform time step (a 256 x 256 frame: ~3 s, ~0.6 GB)
 MAX_SAMPLES_PER_PULSE = 1000  # [-] pulse width / time step at most
@@ -89,6 +89,42 @@ def _check_sun(scene: SceneKeys) -> None:
         )
 
 
+def _check_trajectory(scene: SceneKeys) -> None:
+    """The tumble axis not zero, the initial attitude a quaternion, an approach or hold of at
+    most MAX_TRAJECTORY_FRAMES frames, and no tumble under an orbit-lit Sun (the Sun's direction
+    in the body frame there assumes the LVLH attitude)."""
+    tr = scene.trajectory
+    axis = tr.tumble_axis
+    if len(axis) != 3 or math.hypot(*axis) < 1e-12:
+        raise SceneError(
+            f"trajectory.tumble_axis = {list(axis)!r}: give 3 numbers x, y, z, not all 0 "
+            "(the body axis the target spins about)"
+        )
+    q = tr.initial_quaternion_wxyz
+    if len(q) != 4 or math.hypot(*q) < 1e-9:
+        raise SceneError(
+            f"trajectory.initial_quaternion_wxyz = {list(q)!r}: give 4 numbers w, x, y, z, "
+            "not all 0"
+        )
+    if tr.kind != "orbit":
+        frames = math.floor(tr.duration_s * tr.frame_rate_hz * (1.0 + 1e-9)) + 1
+        if frames > MAX_TRAJECTORY_FRAMES:
+            raise SceneError(
+                f"trajectory.frame_rate_hz = {tr.frame_rate_hz:g} Hz over trajectory.duration_s "
+                f"= {tr.duration_s:g} s makes {frames} frames (at most "
+                f"{MAX_TRAJECTORY_FRAMES}): lower the rate or shorten the duration"
+            )
+    turned = tr.tumble_rate_deg_s != 0.0 or any(
+        abs(a - b) > 1e-12 for a, b in zip(q, (1.0, 0.0, 0.0, 0.0), strict=True)
+    )
+    if turned and scene.sun.mode == "orbit":
+        raise SceneError(
+            "trajectory.tumble_rate_deg_s / initial_quaternion_wxyz turn the target away from "
+            "its LVLH attitude, which sun.mode = orbit assumes: use sun.mode = manual or none, "
+            "or no tumble"
+        )
+
+
 def validate(scene: SceneKeys) -> None:
     """Check every value and the cross-field rules; raise SceneError naming the key."""
     check_fields(scene, "", names=("preset", "seed", "conventions", "paper_forms"))
@@ -130,6 +166,7 @@ def validate(scene: SceneKeys) -> None:
             f"amplifiers.power_gains has {len(a.power_gains)}: give one of each per stage"
         )
     _check_sun(scene)
+    _check_trajectory(scene)
     check = registry.get(scene.receiver.kind).check_scene  # the receiver's own rules
     if check is not None:
         registry.resolve(check)(scene)

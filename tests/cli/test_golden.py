@@ -34,10 +34,12 @@ on 2026-11-26 for the Monte Carlo's new noise draw (one stream per pixel, white 
 second sample: docs/physics.md#mc-noise-draw): the montecarlo case's draws change (its counts
 move by a few: 7 -> 12 outliers, 14 -> 19 dropped), and through the gross-error tables the Monte
 Carlo makes, the paper and oblique cases' gross errors (one fewer in the oblique case; range sums
-within 0.4 m of 1.7e6 m); the Monte Carlo's statistical tests are the guard. Written again on
-2026-12-02 for the quality block's new figures (recall_sd, recall_projected, recall_cap,
-recall_projected_cap, seen_projected_area_m2): every other figure, column and hash agreed, but
-one fly-around Sun angle in its 16th digit (the run was on another CPU: an AMD EPYC, where the
+within 0.4 m of 1.7e6 m); the Monte Carlo's statistical tests are the guard. On 2026-12-02 the
+scene's new ``[trajectory]`` section (its defaults) was added to every case's summary, and the
+fly-around's ground truth (``truth`` per frame, ``trajectory``, ``conventions``), and the quality
+block's new figures (recall_sd, recall_projected, recall_cap, recall_projected_cap,
+seen_projected_area_m2): those entries only; every other figure, column and hash agreed, but one
+fly-around Sun angle in its 16th digit (the run was on another CPU: an AMD EPYC, where the
 previous one was an Intel Xeon).
 
 Regenerate only for a change that is meant to alter results, and say so in its commit:

@@ -128,11 +128,32 @@ ALTERNATIVES = {
     "gm.attenuation_db": (20.0, GM),
     "gm.pileup_correction": ("fit", {**GM, "gm.attenuation_db": 10.0}),
     "quality.tau_m": (0.002, {}),  # the ground-truth outlier flag of points 2 mm off
+    "trajectory.kind": ("approach", {}),
+    "trajectory.start_range_m": (300.0, {}),
+    "trajectory.end_range_m": (50.0, {}),
+    "trajectory.duration_s": (30.0, {}),
+    "trajectory.frame_rate_hz": (2.0, {}),
+    "trajectory.tumble_rate_deg_s": (5.0, {}),
+    "trajectory.tumble_axis": ((1.0, 0.0, 0.0), {}),
+    "trajectory.initial_quaternion_wxyz": ((0.0, 1.0, 0.0, 0.0), {}),
 }
 # keys whose change leaves this scene's arrays as they were, and why
 INERT = {
     "detector.pixel_pitch_m": "sets only the focal length, which no stage uses",
     "orbit.imaging_tle": "the imaging satellite's orbit poses fly-around frames only",
+    **{
+        f"trajectory.{name}": "the trajectory poses fly-around frames only (each frame's pose keys)"
+        for name in (
+            "kind",
+            "start_range_m",
+            "end_range_m",
+            "duration_s",
+            "frame_rate_hz",
+            "tumble_rate_deg_s",
+            "tumble_axis",
+            "initial_quaternion_wxyz",
+        )
+    },
 }
 CASES = [*(("paper_forms", (form,)) for form in PAPER_FORMS), *ALTERNATIVES.items()]
 

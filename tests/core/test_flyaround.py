@@ -17,7 +17,14 @@ from plyfile import PlyData
 import simcore
 from simcore import io, orbit
 from simcore.cli import CliError
-from simcore.cli.flyaround import JSON_NAME, PNG_NAME, add_parser, plot_flyaround, run_cli
+from simcore.cli.flyaround import (
+    JSON_NAME,
+    PNG_NAME,
+    POSES_NAME,
+    add_parser,
+    plot_flyaround,
+    run_cli,
+)
 from simcore.flyaround import frame_filename, run_flyaround
 
 FAST = {"pixels": 32, "fidelity.subrays": 1}
@@ -178,7 +185,7 @@ def test_cli_writes_a_ply_per_frame_the_json_and_the_png(tmp_path, capsys):
     argv += ["--set", "pixels=32", "--set", "fidelity.subrays=1"]
     assert run_cli(parse_cli(argv)) == 0
     times = [0.0, 300.0, 600.0]  # default --interval-s 300, end point included
-    names = {frame_filename(i, t) for i, t in enumerate(times)} | {JSON_NAME, PNG_NAME}
+    names = {frame_filename(i, t) for i, t in enumerate(times)} | {JSON_NAME, PNG_NAME, POSES_NAME}
     assert {p.name for p in out.iterdir()} == names
     data = json.loads((out / JSON_NAME).read_text())
     assert data["j2"] is True and data["interval_s"] == 300.0

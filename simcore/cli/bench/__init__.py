@@ -3,14 +3,15 @@ preset's time against its error (``tradeoff``), with ``--startup`` the phases of
 in fresh processes (``startup``), with ``--design`` a design study's wall time (``design``), with
 ``--kernel`` the compiled echo kernel against the numpy path in fresh processes (``kernel``), with
 ``--sweep`` a sweep's wall time on Dask clusters of 1 and 2 workers (``sweep``), with ``--atlas``
-the MRO's whole sphere of attitudes and the quality stage's shared samples (``atlas``).
+the MRO's whole sphere of attitudes and the quality stage's shared samples (``atlas``), with
+``--track`` the pose track's errors and cost against the targets of issue 40 (``track``).
 
     lmapd bench [--quick] [--json FILE] [--tradeoff --out DIR [--pixels N] | --startup |
                 --design [--trials N] [--workers N] |
                 --kernel [--rounds N] [--repeats N] [--before DIR] |
                 --sweep [--frames N] [--pixels N] [--workers N ...] [--backends B ...]
                         [--repeats N] |
-                --atlas [--pixels N] [--workers N] [--repeats N]]
+                --atlas [--pixels N] [--workers N] [--repeats N] | --track]
 
 The modules load the imaging chain; they are imported when the command runs, not at ``--help``.
 The benchmarks that need a browser or a served app stay scripts (``scripts/bench_app.py``,
@@ -65,6 +66,12 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
         help="lmapd atlas of the MRO at 10 deg (614 attitudes) at 64 and 128 px, and the "
         "quality stage with its samples shared against drawn anew",
     )
+    bench.add_argument(
+        "--track",
+        action="store_true",
+        help="the pose track's errors on the Table 3 fly-around and on 2 km -> 20 m approaches "
+        "(pixels, pulse energy), its cost against the frame's",
+    )
     bench.add_argument("--trials", type=int, help="designs to screen for --design")
     bench.add_argument(
         "--workers",
@@ -116,6 +123,7 @@ def run_cli(args: argparse.Namespace) -> int:
         "--kernel": args.kernel,
         "--sweep": args.sweep,
         "--atlas": args.atlas,
+        "--track": args.track,
     }
     chosen = [name for name, on in modes.items() if on]
     if len(chosen) > 1:
@@ -150,6 +158,10 @@ def run_cli(args: argparse.Namespace) -> int:
             repeats=args.repeats or (1 if args.quick else 3),
             json_path=args.json,
         )
+    if args.track:
+        from . import track  # noqa: PLC0415  (the imaging chain, the registration)
+
+        return track.main(quick=args.quick, json_path=args.json)
     if args.startup:
         from . import startup  # noqa: PLC0415
 
@@ -172,6 +184,7 @@ OPTIONS = {
     "--kernel": ("rounds", "repeats", "before"),
     "--sweep": ("frames", "pixels", "workers", "backends", "repeats"),
     "--atlas": ("pixels", "workers", "repeats"),
+    "--track": (),
 }
 
 

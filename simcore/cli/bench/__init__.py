@@ -2,13 +2,15 @@
 preset's time against its error (``tradeoff``), with ``--startup`` the phases of ``lmapd simulate``
 in fresh processes (``startup``), with ``--design`` a design study's wall time (``design``), with
 ``--kernel`` the compiled echo kernel against the numpy path in fresh processes (``kernel``), with
-``--sweep`` a sweep's wall time on Dask clusters of 1 and 2 workers (``sweep``).
+``--sweep`` a sweep's wall time on Dask clusters of 1 and 2 workers (``sweep``), with ``--gm``
+Geiger mode's cold run and slider changes against an older checkout (``gm``).
 
     lmapd bench [--quick] [--json FILE] [--tradeoff --out DIR [--pixels N] | --startup |
                 --design [--trials N] [--workers N] |
                 --kernel [--rounds N] [--repeats N] [--before DIR] |
                 --sweep [--frames N] [--pixels N] [--workers N ...] [--backends B ...]
-                        [--repeats N]]
+                        [--repeats N] |
+                --gm [--rounds N] [--repeats N] [--before DIR]]
 
 The modules load the imaging chain; they are imported when the command runs, not at ``--help``.
 The benchmarks that need a browser or a served app stay scripts (``scripts/bench_app.py``,
@@ -57,6 +59,12 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
         action="store_true",
         help="a sweep's wall time on Dask clusters of 1 and 2 workers (the best of the rounds)",
     )
+    bench.add_argument(
+        "--gm",
+        action="store_true",
+        help="Geiger mode: a cold lmapd simulate at 256 x 256 x 100 pulses and one session's "
+        "first frame and pitch, energy, TNR and pulses changes (median and range)",
+    )
     bench.add_argument("--trials", type=int, help="designs to screen for --design")
     bench.add_argument(
         "--workers",
@@ -73,18 +81,21 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
         "and --sweep (default 128; 32 with --quick)",
     )
     bench.add_argument(
-        "--rounds", type=int, help="rounds of fresh processes for --kernel (default 3; 1 quick)"
+        "--rounds",
+        type=int,
+        help="rounds of fresh processes for --kernel and --gm (default 3; 1 quick)",
     )
     bench.add_argument(
         "--repeats",
         type=int,
         help="warm frames a process for --kernel (default 7; 3 quick), timed rounds for --sweep "
-        "(default 3; 1 quick)",
+        "(default 3; 1 quick), changes of each kind for --gm (default 3; 2 quick)",
     )
     bench.add_argument(
         "--before",
         metavar="DIR",
-        help="for --kernel: also time the code in DIR (an older checkout, first on PYTHONPATH)",
+        help="for --kernel and --gm: also time the code in DIR (an older checkout, first on "
+        "PYTHONPATH)",
     )
     bench.add_argument(
         "--frames", type=int, help="frames of the sweep for --sweep (default 200; 20 quick)"
@@ -107,6 +118,7 @@ def run_cli(args: argparse.Namespace) -> int:
         "--design": args.design,
         "--kernel": args.kernel,
         "--sweep": args.sweep,
+        "--gm": args.gm,
     }
     chosen = [name for name, on in modes.items() if on]
     if len(chosen) > 1:
@@ -123,6 +135,12 @@ def run_cli(args: argparse.Namespace) -> int:
         rounds = args.rounds or (1 if args.quick else 3)
         repeats = args.repeats or (3 if args.quick else 7)
         return kernel.main(rounds, repeats, args.json, args.before)
+    if args.gm:
+        from . import gm  # noqa: PLC0415  (starts fresh processes)
+
+        rounds = args.rounds or (1 if args.quick else 3)
+        repeats = args.repeats or (2 if args.quick else 3)
+        return gm.main(rounds, repeats, args.json, args.before, args.quick)
     if args.sweep:
         from . import sweep  # noqa: PLC0415  (the imaging chain, Dask)
 
@@ -155,6 +173,7 @@ OPTIONS = {
     "--design": ("trials", "workers"),
     "--kernel": ("rounds", "repeats", "before"),
     "--sweep": ("frames", "pixels", "workers", "backends", "repeats"),
+    "--gm": ("rounds", "repeats", "before"),
 }
 
 

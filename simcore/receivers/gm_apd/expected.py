@@ -220,7 +220,8 @@ def coates_centroid(
 ) -> Prediction:
     """Expected centroid and its sd of Coates' estimates (``coates``) or of the raw counts
     less the background over each pixel's window (module docstring); ``min_counts`` (scalar or
-    (n,)): the counts a detected pixel has at least (its threshold)."""
+    (n,)): the counts a detected pixel has at least (its threshold; None: ``sd_s`` holds the
+    variance before the count's factor, :func:`with_threshold` applies it)."""
     n_b = q.shape[1]
     bg = background_per_bin[:, None]
     t_bin = (start_bin[:, None] + np.arange(n_b)[None, :] + 0.5) * t.bin_s
@@ -252,13 +253,22 @@ def coates_centroid(
         var_z = ((c * c * q).sum(axis=1) - cq * cq) / t.n_pulses
     var_t = np.maximum(var_z, 0.0) / (safe * safe)
     signal = t.n_pulses * np.maximum(q - bg, 0.0).sum(axis=1)
-    # the ratio's own spread with a Poisson number of counts, given the pixel was detected
-    var_t = var_t * signal * inverse_count_mean(signal, min_counts)
-    return Prediction(
+    raw = Prediction(
         t_s=np.where(ok, t_c, np.nan),
-        sd_s=np.where(ok, np.sqrt(var_t), np.nan),
+        sd_s=np.where(ok, var_t, np.nan),
         signal_counts=signal,
         skew=_skew(mean_v, c, signal),
+    )
+    return raw if min_counts is None else with_threshold(raw, min_counts)
+
+
+def with_threshold(raw: Prediction, min_counts=1.0) -> Prediction:
+    """``raw`` (:func:`coates_centroid` without a threshold: ``sd_s`` its variance per count
+    [s^2]) given its detected pixels' thresholds ``min_counts`` (scalar or (n,)): the ratio's
+    own spread with a Poisson number of counts, given the pixel was detected."""
+    var_t = raw.sd_s * raw.signal_counts * inverse_count_mean(raw.signal_counts, min_counts)
+    return Prediction(
+        t_s=raw.t_s, sd_s=np.sqrt(var_t), signal_counts=raw.signal_counts, skew=raw.skew
     )
 
 

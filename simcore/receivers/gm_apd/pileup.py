@@ -41,7 +41,9 @@ def predict_pixels(
     """The range estimate of each lit pixel as its histogram gives it, from the gate's opening
     [s]: the echo's start (the centroid less 2 s, Eq. 1's mean delay; or the first-photon
     fit's t0, ``correction = "fit"``), and its sd (module docstring; arguments as
-    :func:`expected_windows`; ``min_counts``: each pixel's detection threshold in counts).
+    :func:`expected_windows`; ``min_counts``: each pixel's detection threshold in counts;
+    None, for the centroid only: ``sd_s`` holds the variance before the threshold's factor,
+    which :func:`.expected.with_threshold` applies, so that a threshold change re-uses it).
     In blocks of pixels of at most BLOCK_VALUES fine cells; a window of more than MAX_BINS bins
     (TDC bins far finer than the pulse and the jitter) is modelled on bins merged by g to at
     most MAX_BINS (each merged bin's hazard is then still small, so Coates' estimate of it is
@@ -62,7 +64,10 @@ def predict_pixels(
         width, pre = max(1, round(width / g)), int(np.ceil(pre / g))
         length, n_gate_bins = int(np.ceil(length / g)), int(np.ceil(n_gate_bins / g))
     n = len(rate_hz)
-    min_counts = np.broadcast_to(np.asarray(min_counts, dtype=np.float64), (n,))
+    if min_counts is None and correction == "fit":
+        raise ValueError("the first-photon fit's prediction needs the thresholds (min_counts)")
+    if min_counts is not None:
+        min_counts = np.broadcast_to(np.asarray(min_counts, dtype=np.float64), (n,))
     span = 2 * (pre + width + length) + 16
     cells = (span + 8 * length) * fine_cells_per_bin(t) + 4096
     rows = max(1, int(BLOCK_VALUES // max(cells, 1.0)))
@@ -82,7 +87,7 @@ def predict_pixels(
                 n_gate_bins,
                 coates,
                 correction,
-                min_counts[sl],
+                None if min_counts is None else min_counts[sl],
             )
         )
     if not parts:

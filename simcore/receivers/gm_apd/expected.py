@@ -106,7 +106,7 @@ def expected_histogram(
                 lam[rows] += ep[rows, k, None] * -np.expm1(np.log1p(xk) - xk)
                 continue
             xk = np.maximum((te - et[:, k, None]) / t.scale_s, 0.0)
-            lam += np.where(on[:, None], ep[:, k, None] * -np.expm1(np.log1p(xk) - xk), 0.0)
+            lam += ep[:, k, None] * -np.expm1(np.log1p(xk) - xk)  # every row has it
         a0 = armed_at_start[sl]
         p = -np.expm1(-np.diff(lam, axis=1))
         # pulses dead when the grid opens, from an avalanche less than d before it (the
@@ -122,13 +122,14 @@ def expected_histogram(
             # as a running log-sum-exp (L reaches 10^4 in a bright echo)
             rel = lam - lam[:, :1]
             armed = a0[:, None] * np.exp(-rel[:, :-1])
-            if rho.any():
+            live = np.flatnonzero(rho.any(axis=1))  # the rows with re-armed pulses (the
+            if len(live):  # others would add exp(-inf) = 0 to every cell)
                 with np.errstate(divide="ignore"):
-                    terms = np.log(rho) + rel[:, 1:]
+                    terms = np.log(rho[live]) + rel[live, 1:]
                 acc = np.logaddexp.accumulate(terms, axis=1)
                 back = np.full_like(acc, -np.inf)
                 back[:, 1:] = acc[:, :-1]  # re-arms before cell i
-                armed = armed + np.exp(back - rel[:, :-1])
+                armed[live] = armed[live] + np.exp(back - rel[live, :-1])
             e = np.minimum(armed, 1.0) * p
         else:  # cell by cell, the cells' rows contiguous
             p_t = np.ascontiguousarray(p.T)

@@ -15,9 +15,12 @@ armed pulse left and the centroid moves towards the echo's onset: the pile-up bi
 from __future__ import annotations
 
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 from scipy import special
+
+from ...cache import TableCache
 
 A_TABLE = 128  # armed pulses up to which the Coates estimate's moments are tabulated exactly
 
@@ -41,12 +44,24 @@ def _u_grid() -> np.ndarray:
     return np.arange(0.0, U_MAX + U_STEP / 2, U_STEP)
 
 
+# the table depends on this module's constants only: computed once, kept on disk (simcore.cache)
+TABLE = TableCache("gm_coates_moments", (Path(__file__).resolve(),), max_memory=1, max_entries=4)
+
+
 @lru_cache(maxsize=1)
 def _coates_table() -> np.ndarray:
     """(A_TABLE + 1, U, 3) mean, variance and covariance with n of f = -ln(1 - min(n, A - 1/2)
     / A), n ~ Binomial(A, h), h = 1 - e^-u on the u grid; A = 0 gives 0 (no armed pulse). The
     variance, not the second moment, is tabulated: every entry is then nearly linear in h where
-    h is small, so the interpolation in u keeps it."""
+    h is small, so the interpolation in u keeps it. Computed once (0.1-0.2 s) and cached on
+    disk (:data:`TABLE`)."""
+    return TABLE.get((A_TABLE, U_MAX, U_STEP), lambda: {"moments": _coates_table_computed()})[
+        "moments"
+    ]
+
+
+def _coates_table_computed() -> np.ndarray:
+    """:func:`_coates_table` computed."""
     u = _u_grid()
     h = -np.expm1(-u)
     out = np.zeros((3, A_TABLE + 1, len(u)))

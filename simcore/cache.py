@@ -18,7 +18,7 @@ import warnings
 from collections import OrderedDict
 from collections.abc import Callable
 from pathlib import Path
-from typing import IO
+from typing import IO, Any
 
 CACHE_ENV = "LMAPD_CACHE_DIR"
 
@@ -173,7 +173,8 @@ def _write_table(file: Path, text: str, table: dict, max_entries: int) -> None:
     import numpy as np  # noqa: PLC0415
 
     buffer = io.BytesIO()
-    np.savez(buffer, **{_KEY: np.array(text)}, **table)
+    arrays: dict[str, Any] = {_KEY: np.array(text), **table}
+    np.savez(buffer, **arrays)
     try:
         write_atomically(file, lambda fh: fh.write(buffer.getvalue()), max_entries)
     except OSError as exc:

@@ -45,8 +45,9 @@ def predicted_range_m(
     re-uses it."""
     if len(echo.pixel) == 0:
         return np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0)
-    if getattr(rx, "expected", None) is not None:
-        pred = with_threshold(rx.expected, np.asarray(min_counts, dtype=np.float64))
+    expected = getattr(rx, "expected", None)
+    if expected is not None:
+        pred = with_threshold(expected, np.asarray(min_counts, dtype=np.float64))
     else:
         pred = _predict(scene, echo, rx.rate_hz, rx.histogram.n_bins, pre, length, min_counts)
     t_lo = rx.gate_start_s

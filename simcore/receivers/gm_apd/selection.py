@@ -94,7 +94,7 @@ def selection_table(
     peak_counts = np.zeros((top, TABLE_DRAWS))
     draws = np.zeros(top, dtype=np.int64)
     num, den = np.zeros(top), np.zeros(top)
-    shares = coates_shares(n_pulses, TABLE_COUNTS) if coates else None
+    shares = coates_shares(n_pulses, TABLE_COUNTS)
     for m in range(1, top + 1):
         b = d[f"bin_{m}"].astype(np.float64)  # (r, m) each count's bin, sorted
         phase_s = d[f"phase_{m}"][:, None]  # the echo's start within its bin

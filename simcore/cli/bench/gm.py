@@ -68,31 +68,37 @@ sys.stdout.write("\n" + json.dumps(out) + "\n")
 SIMULATE = ["simulate", "--set", "gm.pulses=100", "--set", "pixels=256"]
 
 
-def _env(path: str | None, extra: dict[str, str] | None = None) -> dict[str, str]:
+# this code's checkout (the folder holding the simcore package): A's PYTHONPATH
+HERE = str(Path(__file__).resolve().parents[3])
+
+
+def _env(path: str, extra: dict[str, str] | None = None) -> dict[str, str]:
     env = dict(os.environ)
-    if path is not None:
-        env["PYTHONPATH"] = path + os.pathsep + env.get("PYTHONPATH", "")
+    env["PYTHONPATH"] = path + os.pathsep + env.get("PYTHONPATH", "")
     env.update(extra or {})
     return env
 
 
-def _cold_s(path: str | None, argv: list[str], extra: dict[str, str] | None = None) -> float:
-    """Wall time [s] of ``lmapd ARGV`` in a fresh process (the code first on ``path``)."""
+def _cold_s(path: str, argv: list[str], extra: dict[str, str] | None = None) -> float:
+    """Wall time [s] of ``lmapd ARGV`` in a fresh process on the code in ``path`` (run from an
+    empty folder: ``-m`` would put the working folder's code first)."""
     with tempfile.TemporaryDirectory() as tmp:
         cmd = [sys.executable, "-m", "simcore.cli", *argv, "--out", str(Path(tmp) / "c.ply")]
         t0 = time.perf_counter()
-        subprocess.run(cmd, env=_env(path, extra), check=True, capture_output=True)
+        subprocess.run(cmd, env=_env(path, extra), check=True, capture_output=True, cwd=tmp)
         return time.perf_counter() - t0
 
 
-def _session(path: str | None, pixels: int, repeats: int) -> dict:
-    done = subprocess.run(
-        [sys.executable, "-c", SESSION_PROBE, str(pixels), str(repeats)],
-        env=_env(path),
-        check=True,
-        capture_output=True,
-        text=True,
-    )
+def _session(path: str, pixels: int, repeats: int) -> dict:
+    with tempfile.TemporaryDirectory() as tmp:
+        done = subprocess.run(
+            [sys.executable, "-c", SESSION_PROBE, str(pixels), str(repeats)],
+            env=_env(path),
+            check=True,
+            capture_output=True,
+            text=True,
+            cwd=tmp,
+        )
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
@@ -108,7 +114,7 @@ def _numba_dir() -> str:
 
 def run(rounds: int, repeats: int, before: str | None, sizes: tuple[int, ...]) -> dict:
     """The figures of ``rounds`` rounds (module docstring)."""
-    versions = {"A": None} if before is None else {"A": None, "B": str(Path(before).resolve())}
+    versions = {"A": HERE} if before is None else {"A": HERE, "B": str(Path(before).resolve())}
     numba_dir = _numba_dir()
     raw: dict = {v: {"cold_gm": [], "cold_gm_empty": [], "cold_lm": []} for v in versions}
     for v in versions:
@@ -117,6 +123,7 @@ def run(rounds: int, repeats: int, before: str | None, sizes: tuple[int, ...]) -
     load = [os.getloadavg()[0]]
     for path in versions.values():  # a warm-up run each: numba's kernels and tables cached
         _cold_s(path, [*SIMULATE, "--set", "receiver.kind=gm_apd"])
+        _cold_s(path, SIMULATE)
     for _ in range(rounds):
         for v, path in versions.items():
             raw[v]["cold_gm"].append(_cold_s(path, [*SIMULATE, "--set", "receiver.kind=gm_apd"]))

@@ -67,7 +67,7 @@ class Selection:
 _HERE = Path(__file__).resolve()
 # the draws depend on the pulse, jitter, bin and windows only; the shifts on a table, the pulses
 # and the threshold: both cached on disk, keyed by this module's source (simcore.cache)
-DRAWS = TableCache("gm_selection_draws", (_HERE,), max_memory=2, max_entries=16)
+DRAWS = TableCache("gm_selection_draws", (_HERE,), max_memory=2, max_entries=8)  # 20 MB each
 SHIFTS = TableCache("gm_selection_shifts", (_HERE,), max_memory=256, max_entries=512)
 
 
@@ -114,7 +114,7 @@ def selection_table(
         with np.errstate(invalid="ignore", divide="ignore"):
             err[m - 1, :r] = (w * e_bin).sum(axis=1) / w.sum(axis=1)
         # the model's: the window at its expected place
-        ws = d[f"model_start_{m}"][:, None]
+        ws = d[f"model_start_{m}"].astype(np.float64)[:, None]
         w = np.where((b >= ws) & (b < ws + length), share, 0.0)
         num[m - 1] = (w * e_bin).sum(axis=1).mean()
         den[m - 1] = w.sum(axis=1).mean()
@@ -192,8 +192,9 @@ def _draw(scale_s, jitter_s, bin_s, width, pre, length) -> dict[str, np.ndarray]
         out[f"first_{m}"] = first.astype(np.int16)
         before, same = _counts_before_and_same(b)
         out[f"before_{m}"], out[f"same_{m}"] = before.astype(np.int8), same.astype(np.int8)
-        out[f"peak_{m}"] = in_w[np.arange(r), first].astype(np.float64)
-        out[f"model_start_{m}"] = np.floor((phase_s[:, 0] + lead_s) / bin_s) - pre
+        out[f"peak_{m}"] = in_w[np.arange(r), first].astype(np.int8)  # at most 48
+        model_start = np.floor((phase_s[:, 0] + lead_s) / bin_s) - pre
+        out[f"model_start_{m}"] = model_start.astype(np.int64)  # whole numbers: exact
     return out
 
 

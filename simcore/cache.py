@@ -14,6 +14,7 @@ import hashlib
 import io
 import os
 import tempfile
+import threading
 import warnings
 from collections import OrderedDict
 from collections.abc import Callable
@@ -82,6 +83,7 @@ class TableCache:
         self.max_entries = max_entries
         self._memory: OrderedDict[tuple, dict] = OrderedDict()
         self._digest: str | None = None
+        self._lock = threading.Lock()
         self.computed = self.memory_hits = self.disk_hits = 0
 
     def clear_memory(self) -> None:
@@ -116,11 +118,12 @@ class TableCache:
     def get(self, args: tuple, compute: Callable[[], dict]) -> dict:
         """The table of ``args``: from memory, else from disk, else ``compute()`` (a dict of
         arrays), then kept in both. The arrays returned are read-only (shared)."""
-        held = self._memory.get(args)
-        if held is not None:
-            self._memory.move_to_end(args)
-            self.memory_hits += 1
-            return held
+        with self._lock:
+            held = self._memory.get(args)
+            if held is not None:
+                self._memory.move_to_end(args)
+                self.memory_hits += 1
+                return held
         try:
             file = self.entry(args)
             text = self.key_text(args) if file is not None else ""
@@ -136,9 +139,10 @@ class TableCache:
                 _write_table(file, text, table, self.max_entries)
         for value in table.values():
             value.setflags(write=False)
-        self._memory[args] = table
-        while len(self._memory) > self.max_memory:
-            self._memory.popitem(last=False)
+        with self._lock:  # sessions of the app run frames on threads of their own
+            self._memory[args] = table
+            while len(self._memory) > self.max_memory:
+                self._memory.popitem(last=False)
         return table
 
 

@@ -31,6 +31,8 @@ ALLOWED = {
     # the paper's reproduction and its figures are the LM-APD's (Eqs. 7-31) by definition
     "simcore/reproduce.py": "the paper's reproduction: the LM-APD's timing figures",
     "simcore/cli/reproduce/items_echo.py": "the paper's reproduction: the LM-APD's chain",
+    # issue 41's bench times Geiger mode's runs against linear mode's by definition
+    "simcore/cli/bench/gm.py": "lmapd bench --gm: the Geiger-mode wall times",
     # the key reference's doc line of receiver.kind names the built-in kinds (documentation)
     "simcore/scene/sections.py": "the doc of the key receiver.kind",
     # lesson data: scenes a lesson sets up (documented data)

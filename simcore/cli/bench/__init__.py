@@ -4,14 +4,16 @@ in fresh processes (``startup``), with ``--design`` a design study's wall time (
 ``--kernel`` the compiled echo kernel against the numpy path in fresh processes (``kernel``), with
 ``--sweep`` a sweep's wall time on Dask clusters of 1 and 2 workers (``sweep``), with ``--atlas``
 the MRO's whole sphere of attitudes and the quality stage's shared samples (``atlas``), with
-``--track`` the pose track's errors and cost against the targets of issue 40 (``track``).
+``--track`` the pose track's errors and cost against the targets of issue 40 (``track``), with
+``--gm`` Geiger mode's cold run and slider changes against an older checkout (``gm``).
 
     lmapd bench [--quick] [--json FILE] [--tradeoff --out DIR [--pixels N] | --startup |
                 --design [--trials N] [--workers N] |
                 --kernel [--rounds N] [--repeats N] [--before DIR] |
                 --sweep [--frames N] [--pixels N] [--workers N ...] [--backends B ...]
                         [--repeats N] |
-                --atlas [--pixels N] [--workers N] [--repeats N] | --track]
+                --atlas [--pixels N] [--workers N] [--repeats N] | --track |
+                --gm [--rounds N] [--repeats N] [--before DIR]]
 
 The modules load the imaging chain; they are imported when the command runs, not at ``--help``.
 The benchmarks that need a browser or a served app stay scripts (``scripts/bench_app.py``,
@@ -72,6 +74,12 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
         help="the pose track's errors on the Table 3 fly-around and on 2 km -> 20 m approaches "
         "(pixels, pulse energy), its cost against the frame's",
     )
+    bench.add_argument(
+        "--gm",
+        action="store_true",
+        help="Geiger mode: a cold lmapd simulate at 256 x 256 x 100 pulses and one session's "
+        "first frame and pitch, energy, TNR and pulses changes (median and range)",
+    )
     bench.add_argument("--trials", type=int, help="designs to screen for --design")
     bench.add_argument(
         "--workers",
@@ -88,18 +96,21 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
         "--sweep (default 128; 32 with --quick) and --atlas (default: 64, then 128)",
     )
     bench.add_argument(
-        "--rounds", type=int, help="rounds of fresh processes for --kernel (default 3; 1 quick)"
+        "--rounds",
+        type=int,
+        help="rounds of fresh processes for --kernel and --gm (default 3; 1 quick)",
     )
     bench.add_argument(
         "--repeats",
         type=int,
         help="warm frames a process for --kernel (default 7; 3 quick), timed rounds for --sweep "
-        "(default 3; 1 quick)",
+        "(default 3; 1 quick), changes of each kind for --gm (default 3; 2 quick)",
     )
     bench.add_argument(
         "--before",
         metavar="DIR",
-        help="for --kernel: also time the code in DIR (an older checkout, first on PYTHONPATH)",
+        help="for --kernel and --gm: also time the code in DIR (an older checkout, first on "
+        "PYTHONPATH)",
     )
     bench.add_argument(
         "--frames", type=int, help="frames of the sweep for --sweep (default 200; 20 quick)"
@@ -124,6 +135,7 @@ def run_cli(args: argparse.Namespace) -> int:
         "--sweep": args.sweep,
         "--atlas": args.atlas,
         "--track": args.track,
+        "--gm": args.gm,
     }
     chosen = [name for name, on in modes.items() if on]
     if len(chosen) > 1:
@@ -147,6 +159,12 @@ def run_cli(args: argparse.Namespace) -> int:
         pixels = (args.pixels,) if args.pixels else ((32,) if args.quick else (64, 128))
         repeats = args.repeats or (1 if args.quick else 5)
         return atlas.main(pixels, workers, repeats, args.quick, args.json)
+    if args.gm:
+        from . import gm  # noqa: PLC0415  (starts fresh processes)
+
+        rounds = args.rounds or (1 if args.quick else 3)
+        repeats = args.repeats or (2 if args.quick else 3)
+        return gm.main(rounds, repeats, args.json, args.before, args.quick)
     if args.sweep:
         from . import sweep  # noqa: PLC0415  (the imaging chain, Dask)
 
@@ -185,6 +203,7 @@ OPTIONS = {
     "--sweep": ("frames", "pixels", "workers", "backends", "repeats"),
     "--atlas": ("pixels", "workers", "repeats"),
     "--track": (),
+    "--gm": ("rounds", "repeats", "before"),
 }
 
 

@@ -15,9 +15,12 @@ armed pulse left and the centroid moves towards the echo's onset: the pile-up bi
 from __future__ import annotations
 
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 from scipy import special
+
+from ...cache import TableCache
 
 A_TABLE = 128  # armed pulses up to which the Coates estimate's moments are tabulated exactly
 
@@ -41,12 +44,24 @@ def _u_grid() -> np.ndarray:
     return np.arange(0.0, U_MAX + U_STEP / 2, U_STEP)
 
 
+# the table depends on this module's constants only: computed once, kept on disk (simcore.cache)
+TABLE = TableCache("gm_coates_moments", (Path(__file__).resolve(),), max_memory=1, max_entries=4)
+
+
 @lru_cache(maxsize=1)
 def _coates_table() -> np.ndarray:
     """(A_TABLE + 1, U, 3) mean, variance and covariance with n of f = -ln(1 - min(n, A - 1/2)
     / A), n ~ Binomial(A, h), h = 1 - e^-u on the u grid; A = 0 gives 0 (no armed pulse). The
     variance, not the second moment, is tabulated: every entry is then nearly linear in h where
-    h is small, so the interpolation in u keeps it."""
+    h is small, so the interpolation in u keeps it. Computed once (0.1-0.2 s) and cached on
+    disk (:data:`TABLE`)."""
+    return TABLE.get((A_TABLE, U_MAX, U_STEP), lambda: {"moments": _coates_table_computed()})[
+        "moments"
+    ]
+
+
+def _coates_table_computed() -> np.ndarray:
+    """:func:`_coates_table` computed."""
     u = _u_grid()
     h = -np.expm1(-u)
     out = np.zeros((3, A_TABLE + 1, len(u)))
@@ -158,6 +173,61 @@ def coates_bin_moments(n_pulses: int, alpha: np.ndarray, h: np.ndarray) -> np.nd
     mean_a = n_pulses * alpha
     out = np.zeros((4, *mean_a.shape))
     live = (mean_a > 1e-12) & (h > 0)
+    if not _summed_compiled(n_pulses, alpha, h, mean_a, live, out):
+        _summed_numpy(n_pulses, alpha, h, mean_a, live, out)
+    # many armed pulses and a small hazard: the delta method (no clipping, A concentrated)
+    plain = (mean_a >= SMALL_MEAN_A) & (h > 0) & (h < 0.2)
+    if plain.any():
+        mu, hp = mean_a[plain], h[plain]
+        out[0, plain] = -np.log1p(-hp) + hp / (2.0 * mu * (1.0 - hp))
+        out[1, plain] = hp / (mu * (1.0 - hp))
+        out[2, plain] = hp
+        out[3, plain] = -hp / (2.0 * mu * (mu + 1.0) * (1.0 - hp))
+    large = (mean_a >= SMALL_MEAN_A) & (h >= 0.2)
+    if large.any():
+        mu = mean_a[large][:, None]
+        sd = np.sqrt(mu * (1.0 - alpha[large][:, None]))
+        a_nodes = np.clip(mu + sd * _GH_X[None, :], 1.0, n_pulses)
+        hb = np.broadcast_to(h[large][:, None], a_nodes.shape)
+        m = _moments_at(a_nodes, hb)
+        out[:3, large] = m @ _GH_W
+        out[3, large] = (_moments_at(a_nodes + 1.0, hb)[0] - m[0]) @ _GH_W
+    return out
+
+
+SUMMED_SERIAL_BELOW = 4096  # bins summed over A on one thread below this many
+
+
+def _summed_compiled(n_pulses, alpha, h, mean_a, live, out) -> bool:
+    """:func:`_summed_numpy` by the compiled kernel (:mod:`.kernel`, bin by bin on the frame's
+    threads: no (bins, A, 3) gathers), where numba loads; False where it does not."""
+    from ...echo.features import compiled_kernel  # noqa: PLC0415
+
+    if compiled_kernel() is None:
+        return False
+    from ... import parallel  # noqa: PLC0415
+    from . import kernel  # noqa: PLC0415  (numba: loaded with the echo kernel)
+
+    sel = np.flatnonzero(live & (mean_a < SMALL_MEAN_A))
+    bounds = np.array([b for b, _ in _A_SUM_CLASSES])
+    k_max = np.array([k for _, k in _A_SUM_CLASSES])
+    k_top = np.minimum(k_max[np.searchsorted(bounds, mean_a[sel], side="right")], n_pulses)
+    k = np.arange(int(k_top.max(initial=0)) + 1)
+    log_choose = (
+        special.gammaln(n_pulses + 1) - special.gammaln(k + 1) - special.gammaln(n_pulses - k + 1)
+    )
+    i, wu = _u_index(h[sel])
+    threads = parallel.threads_for(len(sel), SUMMED_SERIAL_BELOW)
+    summed = kernel.summed_over_armed(
+        n_pulses, alpha[sel], k_top, i, wu, log_choose, _coates_table(), threads
+    )
+    out[:, sel] = summed
+    return True
+
+
+def _summed_numpy(n_pulses, alpha, h, mean_a, live, out) -> None:
+    """Where the armed pulses' mean is below SMALL_MEAN_A: the four moments summed over A
+    exactly (A's binomial law to the class's largest A, its tail below 1e-7), into ``out``."""
     lo_mean = 0.0
     chunks = []
     for hi_mean, k_max in _A_SUM_CLASSES:
@@ -190,21 +260,3 @@ def coates_bin_moments(n_pulses: int, alpha: np.ndarray, h: np.ndarray) -> np.nd
         )
         out[:3, sel] = (p[None] * m[:, :, :-1]).sum(axis=2)
         out[3, sel] = (p * (m[0, :, 1:] - m[0, :, :-1])).sum(axis=1)
-    # many armed pulses and a small hazard: the delta method (no clipping, A concentrated)
-    plain = (mean_a >= SMALL_MEAN_A) & (h > 0) & (h < 0.2)
-    if plain.any():
-        mu, hp = mean_a[plain], h[plain]
-        out[0, plain] = -np.log1p(-hp) + hp / (2.0 * mu * (1.0 - hp))
-        out[1, plain] = hp / (mu * (1.0 - hp))
-        out[2, plain] = hp
-        out[3, plain] = -hp / (2.0 * mu * (mu + 1.0) * (1.0 - hp))
-    large = (mean_a >= SMALL_MEAN_A) & (h >= 0.2)
-    if large.any():
-        mu = mean_a[large][:, None]
-        sd = np.sqrt(mu * (1.0 - alpha[large][:, None]))
-        a_nodes = np.clip(mu + sd * _GH_X[None, :], 1.0, n_pulses)
-        hb = np.broadcast_to(h[large][:, None], a_nodes.shape)
-        m = _moments_at(a_nodes, hb)
-        out[:3, large] = m @ _GH_W
-        out[3, large] = (_moments_at(a_nodes + 1.0, hb)[0] - m[0]) @ _GH_W
-    return out

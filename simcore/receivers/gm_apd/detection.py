@@ -29,6 +29,7 @@ from . import histogram as gh
 from .false_points import expected_false_points
 from .figures import (
     _pileup_timing,
+    analysis_window,
     measured_figures,
     pileup_figures,
     predicted_range_m,
@@ -65,11 +66,7 @@ def detect(scene: Scene, echo: EchoStage, rx: GmResponse) -> GmDetection:
     over = peaks.count >= k_t[peaks.pixel]
     p_pix, p_start = peaks.pixel[over], peaks.start_bin[over]
     # the analysis window: from one s and the jitter before the peak window to 12 s after it
-    pre = int(np.ceil((s_scale + JITTER_REACH * gm.jitter_s) / gm.bin_s)) + 1
-    length = pre + int(
-        np.ceil((ECHO_TAIL_SCALES * s_scale + JITTER_REACH * gm.jitter_s) / gm.bin_s)
-    )
-    length = min(length, h.n_bins)
+    pre, length = analysis_window(scene, echo, h.n_bins)
     dead_bins = int(round(gm.dead_time_s / gm.bin_s)) if gm.dead_time_s < 1.0 else h.n_bins
     est = gh.centroid_times(
         h, p_pix, p_start - pre, length, gm.bin_s, bg_per_bin[p_pix], dead_bins, gm.coates

@@ -106,7 +106,7 @@ def expected_histogram(
                 lam[rows] += ep[rows, k, None] * -np.expm1(np.log1p(xk) - xk)
                 continue
             xk = np.maximum((te - et[:, k, None]) / t.scale_s, 0.0)
-            lam += np.where(on[:, None], ep[:, k, None] * -np.expm1(np.log1p(xk) - xk), 0.0)
+            lam += ep[:, k, None] * -np.expm1(np.log1p(xk) - xk)  # every row has it
         a0 = armed_at_start[sl]
         p = -np.expm1(-np.diff(lam, axis=1))
         # pulses dead when the grid opens, from an avalanche less than d before it (the
@@ -122,13 +122,14 @@ def expected_histogram(
             # as a running log-sum-exp (L reaches 10^4 in a bright echo)
             rel = lam - lam[:, :1]
             armed = a0[:, None] * np.exp(-rel[:, :-1])
-            if rho.any():
+            live = np.flatnonzero(rho.any(axis=1))  # the rows with re-armed pulses (the
+            if len(live):  # others would add exp(-inf) = 0 to every cell)
                 with np.errstate(divide="ignore"):
-                    terms = np.log(rho) + rel[:, 1:]
+                    terms = np.log(rho[live]) + rel[live, 1:]
                 acc = np.logaddexp.accumulate(terms, axis=1)
                 back = np.full_like(acc, -np.inf)
                 back[:, 1:] = acc[:, :-1]  # re-arms before cell i
-                armed = armed + np.exp(back - rel[:, :-1])
+                armed[live] = armed[live] + np.exp(back - rel[live, :-1])
             e = np.minimum(armed, 1.0) * p
         else:  # cell by cell, the cells' rows contiguous
             p_t = np.ascontiguousarray(p.T)
@@ -220,7 +221,8 @@ def coates_centroid(
 ) -> Prediction:
     """Expected centroid and its sd of Coates' estimates (``coates``) or of the raw counts
     less the background over each pixel's window (module docstring); ``min_counts`` (scalar or
-    (n,)): the counts a detected pixel has at least (its threshold)."""
+    (n,)): the counts a detected pixel has at least (its threshold; None: ``sd_s`` holds the
+    variance before the count's factor, :func:`with_threshold` applies it)."""
     n_b = q.shape[1]
     bg = background_per_bin[:, None]
     t_bin = (start_bin[:, None] + np.arange(n_b)[None, :] + 0.5) * t.bin_s
@@ -252,13 +254,22 @@ def coates_centroid(
         var_z = ((c * c * q).sum(axis=1) - cq * cq) / t.n_pulses
     var_t = np.maximum(var_z, 0.0) / (safe * safe)
     signal = t.n_pulses * np.maximum(q - bg, 0.0).sum(axis=1)
-    # the ratio's own spread with a Poisson number of counts, given the pixel was detected
-    var_t = var_t * signal * inverse_count_mean(signal, min_counts)
-    return Prediction(
+    raw = Prediction(
         t_s=np.where(ok, t_c, np.nan),
-        sd_s=np.where(ok, np.sqrt(var_t), np.nan),
+        sd_s=np.where(ok, var_t, np.nan),
         signal_counts=signal,
         skew=_skew(mean_v, c, signal),
+    )
+    return raw if min_counts is None else with_threshold(raw, min_counts)
+
+
+def with_threshold(raw: Prediction, min_counts=1.0) -> Prediction:
+    """``raw`` (:func:`coates_centroid` without a threshold: ``sd_s`` its variance per count
+    [s^2]) given its detected pixels' thresholds ``min_counts`` (scalar or (n,)): the ratio's
+    own spread with a Poisson number of counts, given the pixel was detected."""
+    var_t = raw.sd_s * raw.signal_counts * inverse_count_mean(raw.signal_counts, min_counts)
+    return Prediction(
+        t_s=raw.t_s, sd_s=np.sqrt(var_t), signal_counts=raw.signal_counts, skew=raw.skew
     )
 
 

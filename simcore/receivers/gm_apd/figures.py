@@ -16,8 +16,8 @@ from ...echo import EchoStage
 from ...scene import Scene
 from . import pileup as gp
 from . import selection as gs
-from .expected import Timing
-from .frame import frame_pulse_energy_j, photon_energy_j
+from .expected import Timing, with_threshold
+from .frame import ECHO_TAIL_SCALES, JITTER_REACH, _gate_s, frame_pulse_energy_j, photon_energy_j
 from .records import GmResponse
 from .windows import echo_armed_probability, window_bins
 
@@ -40,15 +40,50 @@ def predicted_range_m(
     frame's finite pulses, jitter and bins included: :mod:`.pileup`), its sd [m], its
     skewness [1] and its expected signal counts in the window [1], for the frame's estimator
     (the centroid, or the first-photon fit of ``gm.pileup_correction``); ``min_counts``: the
-    lit pixels' thresholds in counts."""
-    gm = scene.gm
+    lit pixels' thresholds in counts. The centroid's prediction before the thresholds is the
+    receiver stage's (``rx.expected``, :func:`expected_prediction`): a threshold change
+    re-uses it."""
     if len(echo.pixel) == 0:
         return np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0)
+    expected = getattr(rx, "expected", None)
+    if expected is not None:
+        pred = with_threshold(expected, np.asarray(min_counts, dtype=np.float64))
+    else:
+        pred = _predict(scene, echo, rx.rate_hz, rx.histogram.n_bins, pre, length, min_counts)
     t_lo = rx.gate_start_s
+    return 0.5 * C * (t_lo + pred.t_s), 0.5 * C * pred.sd_s, pred.skew, pred.signal_counts
+
+
+def expected_prediction(scene: Scene, echo: EchoStage, rate_hz, n_bins: int):
+    """The centroid's prediction of every lit pixel before the thresholds (``sd_s`` its
+    variance per count, :func:`.pileup.predict_pixels` with ``min_counts`` None), as the
+    receiver stage keeps it; None for the first-photon fit (its thresholds enter throughout)."""
+    if scene.gm.pileup_correction == "fit":
+        return None
+    pre, length = analysis_window(scene, echo, n_bins)
+    return _predict(scene, echo, rate_hz, n_bins, pre, length, None)
+
+
+def analysis_window(scene: Scene, echo: EchoStage, n_bins: int) -> tuple[int, int]:
+    """The analysis window around a pixel's peak window: from one s and the jitter before it
+    (``pre`` bins) to 12 s after it, ``length`` bins in all (at most the gate's)."""
+    gm = scene.gm
+    s_scale = echo.shape.tau_s / echo.shape.a
+    pre = int(np.ceil((s_scale + JITTER_REACH * gm.jitter_s) / gm.bin_s)) + 1
+    length = pre + int(
+        np.ceil((ECHO_TAIL_SCALES * s_scale + JITTER_REACH * gm.jitter_s) / gm.bin_s)
+    )
+    return pre, min(length, n_bins)
+
+
+def _predict(scene: Scene, echo: EchoStage, rate_hz, n_bins: int, pre, length, min_counts):
+    """:func:`.pileup.predict_pixels` of the lit pixels, times from the gate's opening."""
+    gm = scene.gm
+    t_lo = _gate_s(scene)[0]
     pe_per_weight = gm.pde * frame_pulse_energy_j(scene) / photon_energy_j(scene.laser.wavelength_m)
     element_pe = pe_per_weight * np.asarray(echo.weights)
-    rate = rx.rate_hz[echo.pixel]
-    pred = gp.predict_pixels(
+    rate = np.asarray(rate_hz)[echo.pixel]
+    return gp.predict_pixels(
         _pileup_timing(scene, echo),
         np.asarray(echo.arrivals_s) - t_lo,
         element_pe,
@@ -57,12 +92,11 @@ def predicted_range_m(
         window_bins(scene, echo),
         pre,
         length,
-        rx.histogram.n_bins,
+        n_bins,
         gm.coates,
         gm.pileup_correction,
         min_counts,
     )
-    return 0.5 * C * (t_lo + pred.t_s), 0.5 * C * pred.sd_s, pred.skew, pred.signal_counts
 
 
 def selection_offsets_m(scene: Scene, echo: EchoStage, counts, k_t, pre: int, length: int):

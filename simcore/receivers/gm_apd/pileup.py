@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ... import parallel
+from ...stage import Cancelled, stop_check
 from .expected import (
     BLOCK_VALUES,
     Prediction,
@@ -41,11 +43,13 @@ def predict_pixels(
     """The range estimate of each lit pixel as its histogram gives it, from the gate's opening
     [s]: the echo's start (the centroid less 2 s, Eq. 1's mean delay; or the first-photon
     fit's t0, ``correction = "fit"``), and its sd (module docstring; arguments as
-    :func:`expected_windows`; ``min_counts``: each pixel's detection threshold in counts).
-    In blocks of pixels of at most BLOCK_VALUES fine cells; a window of more than MAX_BINS bins
-    (TDC bins far finer than the pulse and the jitter) is modelled on bins merged by g to at
-    most MAX_BINS (each merged bin's hazard is then still small, so Coates' estimate of it is
-    the sum of its parts')."""
+    :func:`expected_windows`; ``min_counts``: each pixel's detection threshold in counts;
+    None, for the centroid only: ``sd_s`` holds the variance before the threshold's factor,
+    which :func:`.expected.with_threshold` applies, so that a threshold change re-uses it).
+    In blocks of pixels of at most BLOCK_VALUES fine cells, on the frame's threads; a window
+    of more than MAX_BINS bins (TDC bins far finer than the pulse and the jitter) is modelled
+    on bins merged by g to at most MAX_BINS (each merged bin's hazard is then still small, so
+    Coates' estimate of it is the sum of its parts')."""
     # a jitter far wider than the gate puts the estimator's window start far before the gate
     # and widens its peak window past it (bins there hold nothing): the model keeps both
     # within a window length
@@ -62,29 +66,36 @@ def predict_pixels(
         width, pre = max(1, round(width / g)), int(np.ceil(pre / g))
         length, n_gate_bins = int(np.ceil(length / g)), int(np.ceil(n_gate_bins / g))
     n = len(rate_hz)
-    min_counts = np.broadcast_to(np.asarray(min_counts, dtype=np.float64), (n,))
+    if min_counts is None and correction == "fit":
+        raise ValueError("the first-photon fit's prediction needs the thresholds (min_counts)")
+    if min_counts is not None:
+        min_counts = np.broadcast_to(np.asarray(min_counts, dtype=np.float64), (n,))
     span = 2 * (pre + width + length) + 16
     cells = (span + 8 * length) * fine_cells_per_bin(t) + 4096
     rows = max(1, int(BLOCK_VALUES // max(cells, 1.0)))
-    parts = []
-    for lo in range(0, n, rows):
+    stop = stop_check()  # a frame no longer wanted ends between blocks
+
+    def block(lo: int) -> Prediction:
+        if stop is not None and stop():
+            raise Cancelled("stopped while predicting the pixels' histograms")
         sl = slice(lo, lo + rows)
-        parts.append(
-            _predict_block(
-                t,
-                element_t_s[sl],
-                element_pe[sl],
-                rate_hz[sl],
-                armed_at_start[sl],
-                width,
-                pre,
-                length,
-                n_gate_bins,
-                coates,
-                correction,
-                min_counts[sl],
-            )
+        return _predict_block(
+            t,
+            element_t_s[sl],
+            element_pe[sl],
+            rate_hz[sl],
+            armed_at_start[sl],
+            width,
+            pre,
+            length,
+            n_gate_bins,
+            coates,
+            correction,
+            None if min_counts is None else min_counts[sl],
         )
+
+    # the blocks on the frame's threads (numpy releases the GIL): each the same as in turn
+    parts = parallel.map_threads(block, range(0, n, rows))
     if not parts:
         empty = np.zeros(0)
         return Prediction(t_s=empty, sd_s=empty, signal_counts=empty, skew=empty)

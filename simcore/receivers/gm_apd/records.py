@@ -12,6 +12,7 @@ import numpy as np
 from ..records import Detection, Response
 from . import events as ev
 from . import histogram as gh
+from .expected import Prediction
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -25,6 +26,10 @@ class GmResponse(Response):
     events : the frame's recorded avalanches (sorted by pixel, bin, pulse)
     histogram : their sparse per-pixel histogram
     gate_start_s : time of the gate's opening since emission [s]
+    expected : the centroid's prediction of each lit pixel from its expected histogram before
+        the thresholds (:func:`.figures.expected_prediction`; None for the first-photon fit):
+        the costly half of the detection's predicted figures, kept here so that a threshold
+        (TNR) change re-runs only the cheap half
     """
 
     signal_pe: np.ndarray
@@ -32,6 +37,7 @@ class GmResponse(Response):
     events: ev.Events
     histogram: gh.Histogram
     gate_start_s: float
+    expected: Prediction | None = None
 
 
 @dataclass(frozen=True, kw_only=True)

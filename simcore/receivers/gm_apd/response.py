@@ -3,7 +3,9 @@ per pulse (the frame's pulses carry ``laser.pulse_energy_j`` less ``gm.attenuati
 photon-starved by default), and the frame itself: ``gm.pulses`` pulses of avalanches of every
 pixel (:mod:`.events`: Poisson primaries from the optical echo of Eqs. 1, 29, 30, background and
 dark counts; non-paralysable dead time reset per gate, jitter, TDC bins, afterpulsing,
-crosstalk), kept as a sparse per-pixel histogram (:mod:`.histogram`).
+crosstalk), kept as a sparse per-pixel histogram (:mod:`.histogram`); and each lit pixel's
+expected histogram's centroid before the thresholds (:mod:`.pileup`), so that a TNR change
+re-runs only the detection's cheap half.
 
 The model: docs/physics.md#geiger-mode.
 """
@@ -14,8 +16,10 @@ import numpy as np
 
 from ...echo import EchoStage
 from ...scene import Scene
+from ...stage import readonly
 from . import events as ev
 from . import histogram as gh
+from .figures import expected_prediction
 from .frame import (
     _check_load,
     _detector,
@@ -54,6 +58,9 @@ def respond(scene: Scene, echo: EchoStage, background=None) -> GmResponse:
     s_counts, b_counts = _expected_window_counts(scene, echo, signal_pe, rate_hz[echo.pixel])
     with np.errstate(divide="ignore", invalid="ignore"):
         snr = np.where(s_counts > 0, s_counts / np.sqrt(s_counts + b_counts), 0.0)
+    expected = expected_prediction(scene, echo, rate_hz, det.n_bins)
+    if expected is not None:
+        readonly(expected.t_s, expected.sd_s, expected.signal_counts, expected.skew)
     return GmResponse(
         peak_power_w=echo.features.peak_w_per_j * energy_j,
         snr=snr,
@@ -68,6 +75,7 @@ def respond(scene: Scene, echo: EchoStage, background=None) -> GmResponse:
         events=events,
         histogram=hist,
         gate_start_s=t_lo,
+        expected=expected,
     )
 
 
@@ -88,4 +96,7 @@ def _response_reads(s: Scene) -> tuple:
         s.gm.pulses,
         s.gm.crosstalk,
         s.gm.afterpulsing,
+        # the expected histogram's prediction (``expected``) is the estimator's
+        s.gm.coates,
+        s.gm.pileup_correction,
     )

@@ -1,6 +1,9 @@
 """glTF files before trimesh reads them: the container and its caps, and Draco-compressed
 geometry (``KHR_draco_mesh_compression``) decoded safely.
 
+Over 500 lines: one untrusted format's checks, every one made before an array is, read in the
+order a file is (container, buffers, views, accessors, meshes and nodes, Draco streams).
+
 NASA publishes its glTF models with their geometry Draco-compressed. trimesh decodes such
 primitives through DracoPy (Google's Draco decoder), but first fills each compressed accessor with
 zeros of the count the file declares, and the decoder is native code fed with the file's bytes.

@@ -63,10 +63,30 @@ def _docstrings(tree: ast.AST) -> set[int]:
     return found
 
 
-def _names_kind(node: ast.AST) -> bool:
-    """Whether ``node`` reads a receiver kind: ``x.kind``, ``receiver_kind``, ``x.receiver_kind``
-    or ``["receiver_kind"]``."""
+# what else has a kind: the trajectory's (``scene.trajectory.kind``, ``tr.kind`` for ``tr =
+# scene.trajectory``, a fly-around result's ``self.kind``, which is its trajectory's)
+TRAJECTORY_NAMES = ("trajectory", "tr")
+TRAJECTORY_FILES = ("simcore/flyaround.py", "simcore/trajectory.py")
+
+
+def _is_trajectory(node: ast.AST) -> bool:
+    """Whether ``node`` is a trajectory section: ``x.trajectory``, ``trajectory`` or ``tr``."""
     if isinstance(node, ast.Attribute):
+        return node.attr == "trajectory"
+    return isinstance(node, ast.Name) and node.id in TRAJECTORY_NAMES
+
+
+def _names_kind(node: ast.AST, path: Path | None = None) -> bool:
+    """Whether ``node`` reads a receiver kind: ``x.kind``, ``receiver_kind``, ``x.receiver_kind``
+    or ``["receiver_kind"]``; not a trajectory's kind (``scene.trajectory.kind``, ``tr.kind``,
+    and a fly-around result's ``self.kind`` in the trajectory's own modules)."""
+    if isinstance(node, ast.Attribute):
+        if node.attr == "kind" and _is_trajectory(node.value):
+            return False
+        if node.attr == "kind" and isinstance(node.value, ast.Name) and node.value.id == "self":
+            rel = str(path.relative_to(ROOT)) if path is not None else ""
+            if rel in TRAJECTORY_FILES:
+                return False
         return node.attr in ("kind", "receiver_kind")
     if isinstance(node, ast.Name):
         return node.id == "receiver_kind"
@@ -101,7 +121,7 @@ def findings(path: Path, text: str) -> list[str]:
                 found.append(f"{where}: the string {node.value[:60]!r} names {named[0]}")
         elif isinstance(node, ast.Compare):
             sides = (node.left, *node.comparators)
-            if any(_names_kind(s) for s in sides) and any(_is_text(s) for s in sides):
+            if any(_names_kind(s, path) for s in sides) and any(_is_text(s) for s in sides):
                 found.append(f"{where}: a comparison tests the receiver's kind")
         elif isinstance(node, ast.Import | ast.ImportFrom):
             names = [a.name for a in node.names]
@@ -140,6 +160,15 @@ def test_the_check_finds_a_kind_test_a_kind_name_and_an_import():
     assert any("imports simcore.receivers.gm_apd" in f for f in found)
     assert sum("comparison" in f for f in found) == 3
     assert any("names gm_apd" in f for f in found)
+    # a trajectory's kind is not a receiver's; a receiver's on anything else still is
+    trajectory = (
+        "def g(scene, tr, self):\n"
+        '    if scene.trajectory.kind == "orbit" or tr.kind == "hold":\n'
+        "        return 1\n"
+        '    return self.kind == "approach"\n'
+    )
+    assert findings(ROOT / "simcore" / "flyaround.py", trajectory) == []
+    assert len(findings(ROOT / "app" / "example.py", trajectory)) == 1  # self.kind elsewhere
     # inside its own package a receiver names itself freely
     own = ROOT / "simcore" / "receivers" / "gm_apd" / "x.py"
     assert findings(own, 'KIND = "gm_apd"\nfrom simcore.receivers.gm_apd import frame\n') == []

@@ -153,6 +153,8 @@ class Receiver:
         snr_caption: their words
     counts : (result) -> the frame's counts as the ``counts`` chart draws them (its gate, bins,
         pulses, and per pixel the measured, expected and arriving counts), for that chart
+    stops_taken : (result) -> (n_lit,) the range [m] of the false alarm that took each lit
+        pixel's stop, NaN where none did (a receiver with a limited number of stops), or None
     frame_load : (scene, echo, background) -> :class:`FrameLoad`, what a frame will cost before
         its receiver stage runs (the app refuses frames over its budget), or None (no check)
     frame_pulses_key : the key of its pulses per frame (a frame sums that many pulses; the
@@ -189,6 +191,7 @@ class Receiver:
     chart_series: tuple[Series, ...] = ()
     snr_caption: str = ""
     counts: Step | None = None
+    stops_taken: Step | None = None
     frame_load: Step | None = None
     frame_pulses_key: str | None = None
     pulses_needed: Step | None = None

@@ -56,6 +56,7 @@ RECEIVER = Receiver(
         ),
         ("Background light", "its shot noise adds to the noise (linear mode),"),
     ),
+    stops_taken=f"{__name__}.taken:stops_taken_m",
     chart="waveform",
     chart_title="Echo waveforms of the selected pixels",
     chart_series=(

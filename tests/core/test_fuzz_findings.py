@@ -1,0 +1,33 @@
+"""Issue 43, item 1: the CLI fuzz's findings, each on a small frame (16 px, a plate)."""
+
+from __future__ import annotations
+
+import pytest
+
+import simcore
+from simcore.scene import with_overrides
+
+
+def _summary(overrides: dict) -> dict:
+    scene = with_overrides(simcore.load_scene(), {"target.mesh": "plate", "pixels": 16} | overrides)
+    return simcore.Pipeline().run(scene).summary()
+
+
+@pytest.mark.parametrize("gate_m", [1e-30, 1e-300])
+def test_a_geiger_mode_gate_shorter_than_one_bin_runs_and_gives_no_point(gate_m):
+    summary = _summary({"receiver.kind": "gm_apd", "timing.range_gate_m": gate_m, "gm.pulses": 4})
+    assert summary["n_points"] == 0
+    assert any("outside the range gate" in line for line in summary["warnings"])
+
+
+def test_geiger_mode_keys_given_to_the_linear_mode_receiver_are_named_in_a_warning():
+    summary = _summary({"gm.pulses": 7, "gm.jitter_s": 1e-9})
+    assert (
+        "gm.jitter_s, gm.pulses set for receiver.kind = gm_apd: receiver.kind = lm_apd ignores "
+        "them" in summary["warnings"]
+    )
+
+
+def test_the_selected_receivers_own_keys_give_no_such_warning():
+    summary = _summary({"receiver.kind": "gm_apd", "gm.pulses": 4})
+    assert not any("ignores" in line for line in summary.get("warnings", []))

@@ -31,3 +31,14 @@ def test_geiger_mode_keys_given_to_the_linear_mode_receiver_are_named_in_a_warni
 def test_the_selected_receivers_own_keys_give_no_such_warning():
     summary = _summary({"receiver.kind": "gm_apd", "gm.pulses": 4})
     assert not any("ignores" in line for line in summary.get("warnings", []))
+
+
+@pytest.mark.parametrize(
+    "blinding", [{"gm.dark_count_rate_hz": 1e9}, {"gm.dead_time_s": 1.0, "sun.mode": "manual"}]
+)
+def test_a_blinded_geiger_mode_pixels_count_snr_is_zero_and_the_summary_says_why(blinding):
+    """1e9 Hz of dark counts or a 1 s dead time in sunlight: the echo expects ~1e-85 counts a
+    frame (the fuzz's median SNR 1e-68 to 1e-103); an SNR of 0 and the warning that says why."""
+    summary = _summary({"receiver.kind": "gm_apd", "gm.pulses": 20} | blinding)
+    assert summary["snr_median"] == 0.0
+    assert any("keep most lit pixels dead" in line for line in summary["warnings"])

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 import simcore
@@ -42,3 +43,22 @@ def test_a_blinded_geiger_mode_pixels_count_snr_is_zero_and_the_summary_says_why
     summary = _summary({"receiver.kind": "gm_apd", "gm.pulses": 20} | blinding)
     assert summary["snr_median"] == 0.0
     assert any("keep most lit pixels dead" in line for line in summary["warnings"])
+
+
+def test_points_beyond_the_targets_reach_are_false_alarms_not_target_points():
+    """At the maximum jitter (1 us, 150 m rms) Geiger-mode windows land anywhere in the gate:
+    a point more than tau outside the shell of the target's bounding sphere is no point of it."""
+    scene = with_overrides(
+        simcore.load_scene(),
+        {"target.mesh": "plate", "pixels": 16, "receiver.kind": "gm_apd", "gm.jitter_s": 1e-6},
+    )
+    result = simcore.Pipeline().run(scene)
+    attrs = result.attributes
+    target = ~attrs["is_outlier"]
+    reach_m = result.target.radius_m + scene.quality.tau_m
+    centre_m = scene.pose.distance_m
+    assert np.all(np.abs(attrs["range_m"][target] - centre_m) <= reach_m)
+    assert np.count_nonzero(~target) > 0  # the fuzz's case has such points
+    far = ~target & np.isnan(attrs["true_range_m"])
+    assert np.array_equal(far, ~target) and np.all(attrs["part_id"][~target] == -1)
+    assert result.summary(quality=False)["n_outliers"] == np.count_nonzero(~target)

@@ -223,7 +223,9 @@ def _outliers(attrs, target) -> dict[str, float]:
     tau from their truth over the target points, the false alarms over all points [1]."""
     far = np.asarray(attrs["outlier"], dtype=bool) & target
     return {
-        "target_outlier_fraction": _ratio(float(np.count_nonzero(far)), np.count_nonzero(target)),
+        "target_outlier_fraction": _ratio(
+            float(np.count_nonzero(far)), float(np.count_nonzero(target))
+        ),
         "false_alarm_fraction": _ratio(float(np.count_nonzero(~target)), len(target)),
     }
 

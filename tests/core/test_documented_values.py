@@ -64,6 +64,7 @@ def _drawn(tau_s: float, bandwidth_hz: float) -> bool:
     return True
 
 
+@pytest.mark.slow  # 7-10 s with a cold cache (the pulse tables of 18 pulse x band pairs)
 @settings(max_examples=12, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow])  # fmt: skip
 @given(tau_s=_log_uniform(*TAU_RANGE_S), bandwidth_hz=_log_uniform(*BANDWIDTH_RANGE_HZ))

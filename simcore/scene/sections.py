@@ -23,7 +23,14 @@ class Laser:
     wavelength_m: float = key(1064e-9, "m", 200e-9, 20e-6, "laser wavelength (not in the paper)")
     pulse_energy_j: float = key(5e-3, "J", 0.0, 100.0, "energy per pulse (Table 4)", lo_open=True)
     pulse_width_s: float = key(
-        5e-9, "s", 10e-12, 1e-6, "pulse width tau of Eq. 1 (the FWHM in our convention)"
+        5e-9,
+        "s",
+        10e-12,
+        1e-6,
+        "pulse width tau of Eq. 1 (the FWHM in our convention); a 10-30 ps pulse needs a wider "
+        "detector.bandwidth_hz (10 ps: 5 GHz, 30 ps: 200 MHz): at 120 MHz its step, tau/10, "
+        "makes the statistical model's gross-error table minutes of work, refused (see "
+        "detector.bandwidth_hz)",
     )
     divergence_rad: float = key(2e-3, "rad", 1e-6, 1.0, "laser full divergence before the expander")
 

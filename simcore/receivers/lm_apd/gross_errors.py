@@ -108,8 +108,8 @@ def calibration_work(tau_s: float, bandwidth_hz: float, dt_s: float, tnr: float)
 def check_calibration_cost(tau_s: float, bandwidth_hz: float, dt_s: float, tnr: float) -> None:
     """Refuse (SceneError, one line naming the keys) a table whose waveform samples x (taps +
     SAMPLE_WORK_TAPS) pass MAX_CALIBRATION_WORK (minutes of work), before any is drawn: a band
-    limit much wider than the step (a 10 ps pulse at 120 MHz: 14,107 taps) or a step much finer than the default
-    (1e11 Hz: 0.5 ps over a 17 ns gate)."""
+    limit much wider than the step (a 10 ps pulse at 120 MHz: 14,107 taps) or a step much finer
+    than the default (1e11 Hz: 0.5 ps over a 17 ns gate)."""
     from ...scene import SceneError  # noqa: PLC0415
 
     samples, taps = max(

@@ -21,9 +21,12 @@ tolerance tau (``quality.tau_m``)
   any lidar with this pixel footprint can reach, so that a requirement above it is known to be
   unreachable whatever the energy;
 
-and along the lines of sight, from each point's ground truth (``simcore.pointcloud.ground_truth``):
-the median signed range error (bias), its RMS, the 95th percentile of its magnitude, the share of
-ground-truth outliers among all points, and the target points per square metre of seen surface.
+and along the lines of sight: the RMS range error against the first hit of each point's own line
+of sight; from each point's ground truth (``simcore.pointcloud.ground_truth``, its surface group's
+energy-weighted range) the median signed range error (bias), its RMS, the 95th percentile of its
+magnitude; each point's distance to the mesh (median, 95th percentile); the share of target
+points more than tau from their truth among the target points and of false alarms among all
+points; and the target points per square metre of seen surface.
 Per part: points, precision, recall and bias.
 
 This is a stage of its own (:data:`QUALITY`), computed only when a summary, a sweep column or the
@@ -273,6 +276,56 @@ def _errors(error_m: np.ndarray) -> dict[str, float | None]:
     }
 
 
+def line_of_sight_errors_m(caster: RayCaster, pose: PoseInSensor, points_t) -> np.ndarray:
+    """(n,) each point's range error along its own line of sight [m]: its distance from the
+    lidar less that of the first hit of the ray from the lidar through it (Embree), signed (a
+    point in front of the surface is negative). Where that ray misses the mesh (a point beside
+    a silhouette) the point's exact distance to the mesh, unsigned.
+
+    Unlike ``range_error_m`` (measured against the energy-weighted truth of the point's own
+    surface group), a mixed pixel's point floating between two depths counts with its distance
+    from the surface its line of sight meets."""
+    points_t = np.asarray(points_t, dtype=np.float64)
+    if not len(points_t):
+        return np.zeros(0)
+    model = caster.model
+    origin_t = -pose.rotation.T @ pose.translation_m
+    offset = points_t - origin_t
+    range_m = np.linalg.norm(offset, axis=1)
+    dirs_t = offset / np.where(range_m > 0, range_m, 1.0)[:, None]
+    start = max(0.0, float(np.linalg.norm(pose.translation_m)) - 1.05 * model.radius_m)
+    hit_m, _ = caster.first_hits(origin_t, dirs_t, start)
+    hit_m = np.asarray(hit_m, dtype=np.float64)
+    error_m = range_m - hit_m
+    miss = ~np.isfinite(hit_m)
+    if miss.any():
+        error_m[miss] = point_to_mesh_m(points_t[miss], model.vertices_m, model.faces)
+    return error_m
+
+
+def _distances(points_t, model: TargetModel) -> dict[str, float | None]:
+    """Median and 95th percentile of the points' exact distance to the whole mesh [m]."""
+    if not len(points_t):
+        return {"distance_to_mesh_median_m": None, "distance_to_mesh_p95_m": None}
+    d_m = point_to_mesh_m(points_t, model.vertices_m, model.faces)
+    return {
+        "distance_to_mesh_median_m": float(np.median(d_m)),
+        "distance_to_mesh_p95_m": float(np.percentile(d_m, 95.0)),
+    }
+
+
+def _outliers(attrs, target) -> dict[str, float]:
+    """The two outlier shares, each over the points it counts: the target points more than
+    tau from their truth over the target points, the false alarms over all points [1]."""
+    far = np.asarray(attrs["outlier"], dtype=bool) & target
+    return {
+        "target_outlier_fraction": _ratio(
+            float(np.count_nonzero(far)), float(np.count_nonzero(target))
+        ),
+        "false_alarm_fraction": _ratio(float(np.count_nonzero(~target)), len(target)),
+    }
+
+
 def quality_metrics(
     cloud: PointCloud,
     caster: RayCaster,
@@ -310,7 +363,12 @@ def quality_metrics(
         "recall": recall,
         "f_score": float(f_score),
         **_errors(error_m),
-        "outlier_fraction": _ratio(float(np.count_nonzero(attrs["outlier"])), len(cloud)),
+        "range_rmse_surface_m": _errors(error_m)["range_rmse_m"],
+        "range_rmse_m": _errors(line_of_sight_errors_m(caster, hits.pose, points_t))[
+            "range_rmse_m"
+        ],
+        **_distances(points_t, model),
+        **_outliers(attrs, target),
         "point_density_per_m2": _ratio(len(points_t), seen_m2),
         "seen_area_m2": seen_m2,
         "n_surface_samples": n_seen,

@@ -301,8 +301,19 @@ def quality_rows(quality: dict) -> list[dict]:
         },
         {"label": "F-score", "value": f"{quality['f_score']:.3f}"},
         {"label": "Range bias (median error)", "value": mm(quality["range_bias_m"], signed=True)},
-        {"label": "Range error RMS", "value": mm(quality["range_rmse_m"])},
+        {"label": "Range error RMS (line of sight)", "value": mm(quality["range_rmse_m"])},
+        {
+            "label": "Point-to-mesh distance, median",
+            "value": mm(quality["distance_to_mesh_median_m"]),
+        },
         {"label": "Range error, 95 % within", "value": mm(quality["range_error_p95_m"])},
-        {"label": "Outliers (false or > tau off)", "value": f"{quality['outlier_fraction']:.1%}"},
+        {
+            "label": "Target points > tau off",
+            "value": f"{quality['target_outlier_fraction']:.1%}",
+        },
+        {
+            "label": "False alarms (of all points)",
+            "value": f"{quality['false_alarm_fraction']:.1%}",
+        },
         {"label": "Point density", "value": f"{quality['point_density_per_m2']:.3g} per m²"},
     ]

@@ -89,6 +89,7 @@ class DesignResult:
     tally: StageTally
     n_run: int
     n_reused: int
+    n_repeated: int
     wall_s: float
 
     def table(self):
@@ -106,9 +107,11 @@ class DesignResult:
                 for k, v in zip(self.study.minimize, self.winner.objectives, strict=True)
             )
             head = f"winner: {cost}"
+        taken = f", {self.n_reused} taken from {self.out_dir}" if self.n_reused else ""
+        again = f", {self.n_repeated} proposed again (evaluated once)" if self.n_repeated else ""
         return (
-            f"{n} designs screened ({feasible} feasible), {self.n_run} evaluated now, "
-            f"{self.n_reused} taken from {self.out_dir} -> {head}  [{self.wall_s:.1f} s]"
+            f"{n} designs screened ({feasible} feasible), {self.n_run} evaluated now{taken}"
+            f"{again} -> {head}  [{self.wall_s:.1f} s]"
         )
 
 
@@ -155,7 +158,8 @@ def run(
     io.write_json(out / "study.json", {"fingerprint": study.fingerprint, "source": study.source})
     if _is_toml(study.text):  # the study, for open_study and the app
         (out / STUDY_COPY).write_text(study.text)
-    state = SearchState(next_number=1 + max((r.number for r in previous), default=-1))
+    first = 1 + max((r.number for r in previous), default=-1)
+    state = SearchState(next_number=first, first_number=first)
     cache = {_key(r.preset, r.params): r for r in previous if r.stage != "screen"}
     bar = tqdm(total=n_trials, desc=f"design {study.name}", unit="trial", disable=not progress)
     try:
@@ -181,6 +185,7 @@ def run(
         tally=state.tally,
         n_run=state.n_run,
         n_reused=state.n_reused,
+        n_repeated=state.n_repeated,
         wall_s=time.perf_counter() - start,
     )
     _write_outputs(result)

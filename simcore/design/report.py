@@ -109,9 +109,43 @@ def worst_point(study: Study, rec: Record, i: int) -> int:
     return where
 
 
+def binding_point(study: Study, rec: Record, i: int) -> int:
+    """The envelope point that decides requirement ``i``: where it is met least for a
+    requirement over the worst point; for one at the median, mean or a percentile the point
+    whose value is nearest that aggregate (the median is met there, not at the worst point)."""
+    req = study.requirements[i]
+    if req.over == "worst":
+        return worst_point(study, rec, i)
+    values = [
+        figures.get(req.figure, math.nan) if "error" not in figures else math.nan
+        for figures in rec.points
+    ]
+    target = req.aggregate(values)
+    if not math.isfinite(target):
+        return worst_point(study, rec, i)
+    gaps = [abs(v - target) if math.isfinite(v) else math.inf for v in values]
+    return min(range(len(values)), key=lambda p: (gaps[p], req.margin(values[p])))
+
+
+def binding_requirement(study: Study, rec: Record) -> int:
+    """The requirement met by the least share of its bound (the first if none)."""
+    if not rec.margins:
+        return 0
+    rel = [
+        m / max(abs(r.bound), 1e-12) for r, m in zip(study.requirements, rec.margins, strict=True)
+    ]
+    return min(range(len(rel)), key=lambda i: rel[i])
+
+
+def design_number(rec: Record) -> int:
+    """The design's record number as ``front.csv`` and ``trials.parquet`` list it: a
+    confirmation's is the screened record it confirms."""
+    return rec.of if rec.stage == "confirm" and rec.of >= 0 else rec.number
+
+
 def write_best(study: Study, rec: Record, out: Path) -> list[Path]:
     """The design as a scene at each envelope point (``best/point_NN.toml``) and, as
-    ``best.toml``, at the point where its binding requirement is met least."""
+    ``best.toml``, at the point that decides its binding requirement (:func:`binding_point`)."""
     written = []
     folder = out / BEST_DIR
     folder.mkdir(parents=True, exist_ok=True)
@@ -121,12 +155,13 @@ def write_best(study: Study, rec: Record, out: Path) -> list[Path]:
         with io.atomic_path(path) as tmp:
             Path(tmp).write_text(text)
         written.append(path)
-    binding = min(range(len(rec.margins)), key=lambda i: rec.margins[i]) if rec.margins else 0
-    point = worst_point(study, rec, binding) if rec.margins else 0
+    binding = binding_requirement(study, rec)
+    point = binding_point(study, rec, binding) if rec.margins else 0
+    why = f", where {study.requirements[binding].text()} binds" if rec.margins else ""
     with io.atomic_path(out / BEST_NAME) as tmp:
         Path(tmp).write_text(
             f"# {study.name}: the winning design at envelope point {point} "
-            f"({study.envelope[point]}), where it meets its requirements least\n"
+            f"({study.envelope[point]}){why}\n"
             + dump_scene(study.scene(rec.params, point, rec.preset))
         )
     return [out / BEST_NAME, *written]
@@ -209,12 +244,25 @@ def _front_figure(plt, study: Study, screened, ok, bad, front, winner):
             )
         ax.set_xlabel("design (order run)")
         ax.set_ylabel(x)
-    if any(v > 0 for r in screened for v in r.objectives[:2] if math.isfinite(v)):
-        ax.set_yscale("log") if len(study.minimize) == 1 else None
+    two = len(study.minimize) >= 2
+    for k, set_scale in enumerate((ax.set_xscale, ax.set_yscale) if two else (ax.set_yscale,)):
+        if _log_axis(study, [r.objectives[k] for r in screened], study.minimize[k]):
+            set_scale("log")
     ax.set_title(f"{study.name}: {len(screened)} designs screened ({study.preset})")
     ax.legend(fontsize=8)
     fig.tight_layout()
     return fig
+
+
+def _log_axis(study: Study, values, name: str) -> bool:
+    """A cost is drawn on a log axis where it is a log variable, or positive and spread over
+    more than a decade (designs below 10 mJ piled on 0 on a linear axis)."""
+    v = [x for x in values if isinstance(x, (int, float)) and math.isfinite(x)]
+    if not v or min(v) <= 0:
+        return False
+    if any(var.log and var.key == name for var in study.variables):
+        return True
+    return max(v) / min(v) > 10.0
 
 
 def _margins_figure(plt, study: Study, winner):
@@ -227,18 +275,40 @@ def _margins_figure(plt, study: Study, winner):
             for figures in winner.points:
                 value = figures.get(req.figure, math.nan) if "error" not in figures else math.nan
                 margins.append(req.margin(value) / max(abs(req.bound), 1e-12))
+            met = winner.margins[i] >= 0 if i < len(winner.margins) else False
             ys = [i + (p - (n_points - 1) / 2) * 0.6 / max(n_points, 1) for p in range(n_points)]
-            ax.barh(
+            # the requirement's colour (met over the envelope as it says: green); a point that
+            # fails on its own inside a met "at median" requirement is hatched
+            bars = ax.barh(
                 ys,
-                margins,
+                [m if math.isfinite(m) else -1.0 for m in margins],
                 height=0.6 / max(n_points, 1),
-                color=["tab:red" if m < 0 else "tab:green" for m in margins],
+                color="tab:green" if met else "tab:red",
+                hatch=None,
             )
+            for p, (bar, m) in enumerate(zip(bars, margins, strict=True)):
+                if met and m < 0:
+                    bar.set_hatch("//")
+                    bar.set_alpha(0.6)
+                ax.annotate(
+                    f"p{p}",
+                    (bar.get_width(), bar.get_y() + bar.get_height() / 2),
+                    xytext=(2 if bar.get_width() >= 0 else -2, 0),
+                    textcoords="offset points",
+                    ha="left" if bar.get_width() >= 0 else "right",
+                    va="center",
+                    fontsize=6,
+                )
         ax.axvline(0, c="k", lw=0.8)
+        ax.set_xscale("symlog", linthresh=0.05)  # a loose requirement does not flatten the rest
         ax.set_yticks(
             range(len(study.requirements)), [r.text() for r in study.requirements], fontsize=8
         )
-        ax.set_xlabel("margin over the bound, relative (one bar per envelope point)")
+        ax.set_xlabel(
+            "margin over the bound, relative (bar pN: envelope point N; green: requirement met, "
+            "hatched: this point fails it)",
+            fontsize=8,
+        )
         ax.set_title("The winning design's margins")
     else:
         ax.text(0.5, 0.5, "no feasible design", ha="center", va="center")
@@ -251,19 +321,38 @@ def _effects_figure(plt, study: Study, ok, bad):
     n = len(study.variables)
     fig, axes = plt.subplots(1, n, figsize=(3.2 * n, 3.0), squeeze=False)
     for ax, var in zip(axes[0], study.variables, strict=True):
+        # the cost against itself says nothing: that variable is drawn against the design's
+        # least relative margin (its binding requirement's) instead
+        itself = var.key == study.minimize[0]
+
+        def ys(group, itself=itself):
+            if not itself:
+                return [r.objectives[0] for r in group]
+            return [_least_margin(study, r) for r in group]
+
         for group, style in ((bad, {"c": "0.7", "s": 10}), (ok, {"c": "tab:blue", "s": 14})):
             xs = [r.params.get(var.key) for r in group]
             if xs and all(isinstance(v, (int, float)) for v in xs):
-                ax.scatter(xs, [r.objectives[0] for r in group], **style)
+                ax.scatter(xs, ys(group), **style)
             elif xs:
-                ax.scatter([str(v) for v in xs], [r.objectives[0] for r in group], **style)
+                ax.scatter([str(v) for v in xs], ys(group), **style)
         if var.log:
             ax.set_xscale("log")
         ax.set_xlabel(var.key, fontsize=8)
-        ax.set_ylabel(study.minimize[0], fontsize=8)
+        ax.set_ylabel("least relative margin" if itself else study.minimize[0], fontsize=8)
     fig.suptitle("Each variable against the first cost (blue: feasible)", fontsize=9)
     fig.tight_layout()
     return fig
+
+
+def _least_margin(study: Study, rec: Record) -> float:
+    """The design's smallest margin relative to its requirement's bound (NaN: none)."""
+    rel = [
+        m / max(abs(r.bound), 1e-12)
+        for r, m in zip(study.requirements, rec.margins, strict=True)
+        if math.isfinite(m)
+    ]
+    return min(rel) if rel else math.nan
 
 
 def _save(fig, path: Path) -> Path:
@@ -327,6 +416,7 @@ def report_text(study, records, front, winner, confirmed, tally, wall_s: float) 
                     )
             if worst.error:
                 lines.append(f"- its evaluation failed: {worst.error}")
+        lines += _why_infeasible(study, [r for r in records if r.stage != "confirm"])
         lines.append("")
         return "\n".join(lines)
     cost = ", ".join(
@@ -335,7 +425,9 @@ def report_text(study, records, front, winner, confirmed, tally, wall_s: float) 
     lines += [
         "## The winner",
         "",
-        f"Design {winner.number} ({winner.stage}, {winner.preset} preset): {_params(winner)}.",
+        f"Design {design_number(winner)} (record {design_number(winner)} of `front.csv`"
+        + (f", confirmed as record {winner.number}" if winner.stage == "confirm" else "")
+        + f"; {winner.stage}, {winner.preset} preset): {_params(winner)}.",
         f"Cost: {cost}.",
         "",
         "| requirement | value over the envelope | margin | worst envelope point |",
@@ -354,10 +446,12 @@ def report_text(study, records, front, winner, confirmed, tally, wall_s: float) 
             for r, m in zip(study.requirements, winner.margins, strict=True)
         ]
         binding = min(range(len(rel)), key=lambda i: rel[i])
+        point = binding_point(study, winner, binding)
         lines += [
             "",
             f"The binding requirement is **{study.requirements[binding].text()}** "
-            f"(met by {100 * rel[binding]:.1f} % of its bound).",
+            f"(met by {100 * rel[binding]:.1f} % of its bound), decided at envelope point "
+            f"{point} ({study.envelope[point]}): `best.toml` is the design there.",
         ]
     if len(front) > 1:
         lines += ["", f"The feasible front holds {len(front)} designs (`front.csv`, `front.png`)."]
@@ -379,6 +473,54 @@ def report_text(study, records, front, winner, confirmed, tally, wall_s: float) 
             )
     lines += ["", "## The staged cache", "", tally.line() + ".", ""]
     return "\n".join(lines)
+
+
+def _why_infeasible(study: Study, records: Sequence[Record]) -> list[str]:
+    """The binding requirement of a study no design meets (the one whose best value over every
+    design falls short by the largest share of its bound), that best value, and its cause: the
+    designs' evaluations failing (memory, a refused scene), the figure not moving with the
+    variables (a cap of the scene: for recall, the seen surface at the pixel footprint), or the
+    variables' ranges ending before it is met."""
+    if not study.requirements or not records:
+        return []
+    failed = [r for r in records if r.error]
+    if len(failed) == len(records):
+        return ["", f"**Cause**: every design's evaluation failed; the first: {failed[0].error}"]
+    best = []
+    for i, req in enumerate(study.requirements):
+        done = [(r.margins[i], r.values[i], r) for r in records if not r.error and r.margins]
+        done = [d for d in done if math.isfinite(d[1])]
+        if not done:
+            continue
+        margin, value, rec = max(done, key=lambda d: (d[0], -d[2].number))
+        values = [d[1] for d in done]
+        best.append((margin / max(abs(req.bound), 1e-12), i, value, rec, values))
+    short = [b for b in best if b[0] < 0]
+    if not short:
+        return []
+    rel, i, value, rec, values = min(short, key=lambda b: b[0])
+    req = study.requirements[i]
+    spread = max(values) - min(values)
+    if spread <= 0.02 * max(abs(req.bound), 1e-12):
+        cause = (
+            f"it hardly moves with the design variables ({_fmt(min(values))}-"
+            f"{_fmt(max(values))} over {len(values)} designs): the scene caps it, not the "
+            "design (for recall: the surface seen at the pixel footprint and incidence)"
+        )
+    else:
+        cause = (
+            f"it moves with the design ({_fmt(min(values))}-{_fmt(max(values))} over "
+            f"{len(values)} designs) but not far enough within the variables' ranges: widen "
+            "them or relax the bound"
+        )
+    lines = [
+        "",
+        f"**Binding requirement**: {req.text()}; the best any design reached is {_fmt(value)} "
+        f"(design {rec.number}, {_fmt(-rel * 100)} % of the bound short). **Cause**: {cause}.",
+    ]
+    if failed:
+        lines.append(f"{len(failed)} designs' evaluations failed; the first: {failed[0].error}")
+    return lines
 
 
 def _params(rec: Record) -> str:

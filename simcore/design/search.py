@@ -73,8 +73,10 @@ class SearchState:
     records: list[Record] = field(default_factory=list)
     tally: StageTally = field(default_factory=StageTally)
     n_run: int = 0
-    n_reused: int = 0
+    n_reused: int = 0  # designs whose record a previous run left in the folder
+    n_repeated: int = 0  # designs this run had evaluated already (the search proposed them again)
     next_number: int = 0  # records are numbered in the order they were run, across resumes
+    first_number: int = 0  # this run's first record number (those below: a previous run's)
 
 
 def _key(preset: str, params: Mapping[str, Any]) -> str:
@@ -157,7 +159,10 @@ def evaluate_designs(
         hit = cache.get(_key(preset, params))
         if hit is not None:
             done[i] = hit
-            state.n_reused += 1
+            if hit.number < state.first_number:
+                state.n_reused += 1
+            else:
+                state.n_repeated += 1
             continue
         scenes, error = [], None
         for p in range(len(study.envelope)):

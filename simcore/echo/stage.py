@@ -12,7 +12,7 @@ import numpy as np
 from .. import geometry, materials, parallel
 from ..constants import C
 from ..pulse import PulseShape, cfd_delay_s, default_time_step_s, scene_pulse_shape
-from ..scene import Scene
+from ..scene import Scene, SceneError
 from ..stage import Stage, readonly
 from ..target import TargetModel, with_materials
 from .elements import element_weights, illumination_gain, merge_elements, split_elements
@@ -80,6 +80,7 @@ def stage_echo(scene: Scene, tgt: geometry.TargetStage, hits: geometry.Hits) -> 
         scene.laser.pulse_width_s, scene.detector.bandwidth_hz
     )
     t_d_s = cfd_delay_s(shape, scene.timing.cfd_delay_s)
+    check_echo_cost(shape, dt_s, int(np.count_nonzero(hits.hit_pixel_mask)))
     blocks = [_echo_block(scene, model, b, shape, dt_s, t_d_s) for b in hits.blocks()]
     pixel = np.concatenate([b["pixel"] for b in blocks])
     # one block of ascending pixels (no refinement) is taken as it is: no copies
@@ -119,6 +120,32 @@ def stage_echo(scene: Scene, tgt: geometry.TargetStage, hits: geometry.Hits) -> 
         material_id=merged("material_id"),
         facet_id=merged("facet_id"),
     )
+
+
+# refused above: samples of the lit pixels' echo windows (the default frame's are about 5e6; 2.4e9,
+# detector.bandwidth_hz = 1e3 at 64 px, ran 48 s in the echo kernel)
+MAX_ECHO_SAMPLES = 2**28
+
+
+def echo_samples(shape: PulseShape, dt_s: float, n_lit: int) -> float:
+    """Samples of ``n_lit`` single-surface echo windows at ``dt_s`` [1]: each spans the band-limited
+    pulse's table (from 1e-5 of its peak before it to 1e-4 after)."""
+    return float(n_lit) * (shape.t_end_s - shape.t_start_s) / dt_s
+
+
+def check_echo_cost(shape: PulseShape, dt_s: float, n_lit: int) -> None:
+    """Refuse (SceneError, one line naming the keys) a frame whose echo windows would hold more
+    than MAX_ECHO_SAMPLES samples, before any is computed: a band limit much wider than the step
+    (detector.bandwidth_hz far below 1 / laser.pulse_width_s)."""
+    samples = echo_samples(shape, dt_s, n_lit)
+    if samples > MAX_ECHO_SAMPLES:
+        raise SceneError(
+            f"detector.bandwidth_hz = {1.0 / (4.0 * np.sqrt(np.pi) * shape.sigma_h_s):g} Hz with "
+            f"laser.pulse_width_s = {shape.tau_s:g} s at a time step of {dt_s:.3g} s: the "
+            f"{n_lit} lit pixels' echo windows would hold {samples:.2g} samples (at most "
+            f"{MAX_ECHO_SAMPLES:.2g}): give a detector.bandwidth_hz nearer 1 / (2 "
+            "laser.pulse_width_s), a coarser fidelity.time_step_s or fewer detector.pixels"
+        )
 
 
 def any_per_row(mask: np.ndarray) -> np.ndarray:

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..plugins.declaration import resolve
-from ..plugins.registry import get
+from ..plugins.registry import get, section_of
 from ..stage import Stage, readonly
 from .records import Detection, Response
 
@@ -29,7 +29,8 @@ def _response_reads(scene: Scene) -> tuple:
 
 
 def _detection_reads(scene: Scene) -> tuple:
-    return (scene.receiver.kind, resolve(get(scene.receiver.kind).detection_reads)(scene))
+    reads = resolve(get(scene.receiver.kind).detection_reads)(scene)
+    return (scene.receiver.kind, reads, ignored_keys(scene))
 
 
 def stage_receiver(scene: Scene, echo: EchoStage, background: Background) -> Response:
@@ -38,7 +39,39 @@ def stage_receiver(scene: Scene, echo: EchoStage, background: Background) -> Res
 
 def stage_detection(scene: Scene, echo: EchoStage, response: Response) -> Detection:
     detection = resolve(get(scene.receiver.kind).detect)(scene, echo, response)
-    return _readonly_arrays(outside_the_gate(scene, detection))
+    return _readonly_arrays(with_ignored_keys(scene, outside_the_gate(scene, detection)))
+
+
+def ignored_keys(scene: Scene) -> tuple[str, ...]:
+    """The keys set (to other than their defaults) in another receiver's section than the
+    selected one's (``gm.pulses`` with ``receiver.kind = lm_apd``): the frame ignores them."""
+    names = []
+    for name, keys in scene.receiver_sections:
+        owner = section_of(name)
+        if owner is None or owner.kind == scene.receiver.kind:
+            continue
+        default = type(keys)()
+        names += [
+            f"{name}.{f.name}"
+            for f in fields(keys)
+            if getattr(keys, f.name) != getattr(default, f.name)
+        ]
+    return tuple(names)
+
+
+def with_ignored_keys(scene: Scene, detection: Detection) -> Detection:
+    """``detection`` with a summary warning naming the keys :func:`ignored_keys` finds."""
+    names = ignored_keys(scene)
+    if not names:
+        return detection
+    owners = sorted({section_of(n.split(".")[0]).kind for n in names})  # type: ignore[union-attr]
+    figures = dict(detection.summary_figures)
+    figures["warnings"] = [
+        *figures.get("warnings", []),
+        f"{', '.join(names)} set for receiver.kind = {' / '.join(owners)}: receiver.kind = "
+        f"{scene.receiver.kind} ignores {'it' if len(names) == 1 else 'them'}",
+    ]
+    return replace(detection, summary_figures=figures)
 
 
 def gate_m(scene: Scene) -> tuple[float, float]:

@@ -25,7 +25,14 @@ class Laser:
     wavelength_m: float = key(1064e-9, "m", 200e-9, 20e-6, "laser wavelength (not in the paper)")
     pulse_energy_j: float = key(5e-3, "J", 0.0, 100.0, "energy per pulse (Table 4)", lo_open=True)
     pulse_width_s: float = key(
-        5e-9, "s", 10e-12, 1e-6, "pulse width tau of Eq. 1 (the FWHM in our convention)"
+        5e-9,
+        "s",
+        10e-12,
+        1e-6,
+        "pulse width tau of Eq. 1 (the FWHM in our convention); a 10-30 ps pulse needs a wider "
+        "detector.bandwidth_hz (10 ps: 5 GHz, 30 ps: 200 MHz): at 120 MHz its step, tau/10, "
+        "makes the statistical model's gross-error table minutes of work, refused (see "
+        "detector.bandwidth_hz)",
     )
     divergence_rad: float = key(2e-3, "rad", 1e-6, 1.0, "laser full divergence before the expander")
 
@@ -102,7 +109,16 @@ class Detector:
         0.4, "1", 0.0, 1.0, "quantum efficiency eta_q at the wavelength", lo_open=True
     )
     excess_noise_k: float = key(0.02, "1", 0.0, 1.0, "ionisation ratio k of Eq. 11 (Si 0.02)")
-    bandwidth_hz: float = key(120e6, "Hz", 1e3, 1e11, "noise-equivalent bandwidth B")
+    bandwidth_hz: float = key(
+        120e6,
+        "Hz",
+        1e3,
+        1e11,
+        "noise-equivalent bandwidth B; far from 1 / (2 tau) the work grows (a band limit wide "
+        "against the time step, a step fine against a 2.5 m gate): a frame whose echo windows "
+        "(2^28 samples) or gross-error table (2^41 samples x taps) would pass its limit is "
+        "refused before either is computed",
+    )
     temperature_k: float = key(298.15, "K", 0.0, 1000.0, "detector temperature", lo_open=True)
     load_ohm: float = key(50.0, "ohm", 0.0, 1e9, "load resistance R_L (Eq. 13)", lo_open=True)
     dark_surface_a: float = key(1e-9, "A", 0.0, 1e-3, "surface dark current I_ds (not multiplied)")
@@ -229,8 +245,9 @@ class Fidelity:
         0.0,
         1e-7,
         "waveform time step; 0 = auto min(tau/10, 1/(20 B)); else at least 10 ps and "
-        "tau/1000 (a pulse spans at most 1000 samples); with the montecarlo noise model the "
-        "range gate spans at most 65536 samples",
+        "tau/1000 (a pulse spans at most 1000 samples); with the montecarlo and photon noise "
+        "models the range gate and the band limit's taps span at most 65536 samples (photon: "
+        "at most 2^30 over the array)",
     )
     refine_subrays: int = key(
         0, "1", 0, 1024, "sub-rays for mixed pixels (edges, depth steps); 0 = no refinement"

@@ -19,6 +19,9 @@ from .sections import MAX_TRAJECTORY_FRAMES, SECTIONS
 MIN_TIME_STEP_S = 1e-11  # [s] the finest waveform time step (a 256 x 256 frame: ~3 s, ~0.6 GB)
 MAX_SAMPLES_PER_PULSE = 1000  # [-] pulse width / time step at most
 MAX_GATE_SAMPLES = 2**16  # [-] Monte Carlo samples per pixel over the gate (1 km at auto: 16k)
+# [-] photon-noise model: samples over the whole array (every one drawn; 256 px over 1 km at auto:
+# 1.05e9, about 2 minutes on two busy cores; 1,024 px: 1.7e10, past 120 s before this limit)
+MAX_PHOTON_FRAME_SAMPLES = 2**30
 SPEED_OF_LIGHT_M_S = 299_792_458.0  # [m/s] exact (SI)
 
 
@@ -43,13 +46,25 @@ def _check_time_step(scene: SceneKeys) -> None:
     if scene.fidelity.noise_model not in ("montecarlo", "photon"):
         return
     step_s = dt or auto_time_step_s(scene)
-    samples = 2.0 * scene.timing.range_gate_m / SPEED_OF_LIGHT_M_S / step_s
+    # the gate and the band limit's taps either side of it (6 sigma_h each, sigma_h = 1 / (4
+    # sqrt(pi) B)): detector.bandwidth_hz = 1e3 adds 3.4e6 samples to every pixel's waveform
+    sigma_h_s = 1.0 / (4.0 * math.sqrt(math.pi) * scene.detector.bandwidth_hz)
+    samples = (2.0 * scene.timing.range_gate_m / SPEED_OF_LIGHT_M_S + 12.0 * sigma_h_s) / step_s
     if samples > MAX_GATE_SAMPLES:
         raise SceneError(
             f"timing.range_gate_m = {scene.timing.range_gate_m:g} m at a time step of "
             f"{step_s:.3g} s is {samples:.3g} samples per pixel for fidelity.noise_model = "
-            f"{scene.fidelity.noise_model} (at most {MAX_GATE_SAMPLES}): shorten the gate or "
-            "give a coarser fidelity.time_step_s"
+            f"{scene.fidelity.noise_model} with the band limit's taps (at most "
+            f"{MAX_GATE_SAMPLES}): shorten the gate, give a coarser fidelity.time_step_s or a "
+            "wider detector.bandwidth_hz"
+        )
+    frame = samples * scene.detector.pixels**2
+    if scene.fidelity.noise_model == "photon" and frame > MAX_PHOTON_FRAME_SAMPLES:
+        raise SceneError(
+            f"detector.pixels = {scene.detector.pixels} with fidelity.noise_model = photon is "
+            f"{frame:.3g} waveform samples a frame, each drawn photon by photon (at most "
+            f"{MAX_PHOTON_FRAME_SAMPLES:.3g}, minutes of work): give fewer detector.pixels, a "
+            "shorter timing.range_gate_m or fidelity.noise_model = montecarlo"
         )
 
 

@@ -61,9 +61,21 @@ METRICS = (
     ("quality.recall_projected", "float64", "recall weighted by projected area (|cos incidence|)"),
     ("quality.recall_cap", "float64", "recall of an ideal lidar with these pixels (its ceiling)"),
     ("quality.range_bias_m", "float64", "median signed range error of the target points [m]"),
-    ("quality.range_rmse_m", "float64", "RMS range error of the target points [m]"),
+    ("quality.range_rmse_m", "float64", "RMS range error along each point's line of sight [m]"),
+    (
+        "quality.range_rmse_surface_m",
+        "float64",
+        "RMS range error against each point's surface-group truth [m]",
+    ),
     ("quality.range_error_p95_m", "float64", "95th percentile of |range error| [m]"),
-    ("quality.outlier_fraction", "float64", "share of points farther than tau from truth"),
+    ("quality.distance_to_mesh_median_m", "float64", "median point-to-mesh distance [m]"),
+    ("quality.distance_to_mesh_p95_m", "float64", "95th percentile point-to-mesh distance [m]"),
+    (
+        "quality.target_outlier_fraction",
+        "float64",
+        "share of target points farther than tau from their truth",
+    ),
+    ("quality.false_alarm_fraction", "float64", "share of all points that are false alarms"),
     ("quality.point_density_per_m2", "float64", "target points per m^2 of seen surface"),
 )
 

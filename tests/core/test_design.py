@@ -287,3 +287,69 @@ def test_a_fly_around_envelope_holds_the_poses_lmapd_flyaround_images():
         assert point["orbit.time_s"] == record["t_s"]
     with pytest.raises(design.StudyError, match="envelope.flyaround"):
         design.study_from_dict({**SMALL, "envelope": {"flyaround": {"every_s": 300}}})
+
+
+# ----------------------------------------------------------------------------------------------
+# issue 43, item 5: design reports that say why
+# ----------------------------------------------------------------------------------------------
+def _record_at(study, values, number=3):
+    """A feasible record whose first requirement takes ``values`` at the envelope points."""
+    from simcore.design.search import Record
+
+    req = study.requirements[0]
+    value = req.aggregate(values)
+    return Record(
+        number=number, stage="screen", preset=study.preset, params={"laser.pulse_energy_j": 1e-3},
+        points=[{req.figure: v} for v in values], values=[value], margins=[req.margin(value)],
+        objectives=[1e-3], feasible=req.margin(value) >= 0,
+    )  # fmt: skip
+
+
+def test_best_toml_is_written_at_the_envelope_point_that_decides_a_median_requirement(tmp_path):
+    spec = {
+        **SMALL,
+        "envelope": {"pose.pitch_deg": [0.0, 10.0, 20.0]},
+        "requirements": {"quality.recall": ">= 0.5 at median"},
+    }
+    study = design.study_from_dict(spec)
+    rec = _record_at(study, [0.41, 0.6, 0.9])  # met at median (0.6), failed at pitch 0
+    design.report.write_best(study, rec, tmp_path)
+    head = (tmp_path / "best.toml").read_text().splitlines()[0]
+    assert "envelope point 1" in head and "quality.recall >= 0.5 at median binds" in head
+    assert load_scene(tmp_path / "best.toml").pose.pitch_deg == 10.0
+
+
+def test_a_worst_point_requirement_still_binds_where_it_is_met_least(tmp_path):
+    spec = {**SMALL, "envelope": {"pose.pitch_deg": [0.0, 10.0, 20.0]},
+            "requirements": {"quality.recall": ">= 0.3"}}  # fmt: skip
+    study = design.study_from_dict(spec)
+    assert design.report.binding_point(study, _record_at(study, [0.6, 0.41, 0.9]), 0) == 1
+
+
+def test_a_fresh_study_folder_takes_nothing_from_it_and_the_report_numbers_match_front_csv(small):
+    result, out = small
+    assert "taken from" not in result.describe()
+    report = (out / "report.md").read_text()
+    rows = (out / "front.csv").read_text().splitlines()
+    number = design.report.design_number(result.winner)
+    assert f"Design {number} (record {number} of `front.csv`" in report
+    assert any(row.split(",")[0] == str(number) for row in rows[1:])
+
+
+def test_a_cost_spread_over_decades_or_a_log_variable_is_drawn_on_a_log_axis():
+    study = design.study_from_dict(SMALL)
+    assert design.report._log_axis(study, [2e-4, 3e-4], "laser.pulse_energy_j")  # a log variable
+    assert design.report._log_axis(study, [1.0, 50.0], "frame_s")
+    assert not design.report._log_axis(study, [1.0, 5.0], "frame_s")
+    assert not design.report._log_axis(study, [0.0, 5.0], "frame_s")
+
+
+def test_an_infeasible_study_names_its_binding_requirement_best_value_and_cause(tmp_path):
+    spec = {**SMALL, "requirements": {"n_target_points": ">= 100000"}, "trials": 3}
+    design.run(design.study_from_dict(spec), tmp_path / "out", workers=0, progress=False)
+    report = (tmp_path / "out" / "report.md").read_text()
+    # 16 x 16 pixels hold at most 256 target points whatever the energy: a cap of the scene
+    assert (
+        "**Binding requirement**: n_target_points >= 100000; the best any design reached" in report
+    )
+    assert "**Cause**: it hardly moves with the design variables" in report

@@ -347,3 +347,61 @@ def test_an_ideal_lidars_recall_of_a_face_on_plate_is_its_pixel_lattices_cover()
     sd = math.sqrt(covered * (1 - covered) / n)
     assert abs(q["recall_cap"] - covered) <= 4 * sd + 2 / 600
     assert q["recall_projected_cap"] == pytest.approx(q["recall_cap"], abs=4 * sd)
+
+
+# ----------------------------------------------------------------------------------------------
+# issue 43, item 4: figures named for what they are
+# ----------------------------------------------------------------------------------------------
+def _shifted_cloud(result, shift_m: float):
+    """The frame's cloud with every target point moved ``shift_m`` along its own line of sight
+    and its ground-truth error set to 0: what a mixed pixel's point floating between two depths
+    looks like against the energy-weighted truth of its surface group."""
+    from simcore.pointcloud import PointCloud
+
+    attrs = dict(result.cloud.attributes)
+    target = ~np.asarray(attrs["is_outlier"], dtype=bool)
+    points = result.cloud.points.copy()
+    r = np.linalg.norm(points[target], axis=1)
+    points[target] *= ((r + shift_m) / r)[:, None]
+    error = attrs["range_error_m"].copy()
+    error[target] = 0.0
+    attrs["range_error_m"] = error
+    outlier = attrs["outlier"].copy()
+    outlier[target] = False
+    attrs["outlier"] = outlier
+    return PointCloud(points=points, attributes=attrs), target
+
+
+def test_the_range_rmse_is_measured_along_each_points_line_of_sight(plate):
+    result = plate[0]
+    shift_m = 0.3
+    cloud, target = _shifted_cloud(result, shift_m)
+    q = quality.quality_metrics(cloud, result.caster, result.hits, FOV_RAD, 0.05, seed=3)
+    # against the plane z = distance each point lies its own measured error + 0.3 m behind it;
+    # the frame's own errors (sd sigma) add in quadrature to within their sample's spread
+    errors = result.attributes["range_error_m"][~result.attributes["is_outlier"]]
+    want = math.sqrt(np.mean((errors + shift_m) ** 2))
+    assert q["range_rmse_m"] == pytest.approx(want, abs=1e-4)
+    assert q["range_rmse_surface_m"] == 0.0  # the surface group's truth sees no error
+
+
+def test_the_distance_to_mesh_figures_are_the_points_exact_distances(plate):
+    result = plate[0]
+    cloud, target = _shifted_cloud(result, 0.3)
+    q = quality.quality_metrics(cloud, result.caster, result.hits, FOV_RAD, 0.05, seed=3)
+    # the plate is the plane z = distance (sensor frame, boresight on its normal): a point's
+    # distance to it is |z - distance| wherever it lies over the plate, as all lit points do
+    d_m = np.abs(cloud.points[target, 2] - DISTANCE_M)
+    assert q["distance_to_mesh_median_m"] == pytest.approx(float(np.median(d_m)), abs=1e-6)
+    assert q["distance_to_mesh_p95_m"] == pytest.approx(float(np.percentile(d_m, 95)), abs=1e-6)
+
+
+def test_the_two_outlier_shares_each_count_over_their_own_points(plate):
+    result = plate[0]
+    attrs = result.attributes
+    false = attrs["is_outlier"]
+    far = attrs["outlier"] & ~false
+    q = result.quality
+    assert q["false_alarm_fraction"] == np.count_nonzero(false) / len(false)
+    assert q["target_outlier_fraction"] == np.count_nonzero(far) / np.count_nonzero(~false)
+    assert "outlier_fraction" not in q

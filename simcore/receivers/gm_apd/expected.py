@@ -325,6 +325,7 @@ def expected_windows(
     rate_hz : (n,) constant rate [1/s]; armed_at_start : (n,) pulses armed before the echo [1]
     """
     n = len(rate_hz)
+    width = max(int(width), 1)  # a gate shorter than one bin (1e-30 m) gives detect 0 bins
     has = element_pe > 0
     first_s = np.where(has, element_t_s, np.inf).min(axis=1)
     last_s = np.where(has, element_t_s, -np.inf).max(axis=1)

@@ -31,6 +31,8 @@ from .frame import (
 from .records import GmResponse
 from .windows import _expected_window_counts
 
+SIGNAL_COUNTS_FLOOR = 1e-6  # expected echo counts a frame below which the count SNR is 0
+
 
 def respond(scene: Scene, echo: EchoStage, background=None) -> GmResponse:
     """The frame: rates, photoelectrons and the avalanches of ``gm.pulses`` pulses."""
@@ -56,8 +58,12 @@ def respond(scene: Scene, echo: EchoStage, background=None) -> GmResponse:
     events = ev.simulate_frame(rng, rates, det, gm.pulses)
     hist = gh.histogram(events, det.n_bins, gm.pulses)
     s_counts, b_counts = _expected_window_counts(scene, echo, signal_pe, rate_hz[echo.pixel])
+    # a pixel that expects under SIGNAL_COUNTS_FLOOR echo counts a frame (blinded by 1e9 Hz of
+    # dark counts or a 1 s dead time in sunlight: 1e-85) has no signal to speak of: SNR 0
     with np.errstate(divide="ignore", invalid="ignore"):
-        snr = np.where(s_counts > 0, s_counts / np.sqrt(s_counts + b_counts), 0.0)
+        snr = np.where(
+            s_counts >= SIGNAL_COUNTS_FLOOR, s_counts / np.sqrt(s_counts + b_counts), 0.0
+        )
     expected = expected_prediction(scene, echo, rate_hz, det.n_bins)
     if expected is not None:
         readonly(expected.t_s, expected.sd_s, expected.signal_counts, expected.skew)

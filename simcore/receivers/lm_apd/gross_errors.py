@@ -52,6 +52,11 @@ GATE_M = 2.5  # the calibration's range gate [m]...
 ECHO_AFTER_GATE_M = 0.45  # ...the echoes start this far into it (3 ns: the CFD's look back)
 SEED = 25  # the calibration's own seed: a table is the same for every frame
 MAX_ENTRIES = 64  # tables kept in the on-disk cache
+# refused above: a table's waveform samples x (the band limit's taps + SAMPLE_WORK_TAPS), its work
+# in filter taps. Measured on two busy cores: detector.bandwidth_hz = 1e6 9.2e11 (17 s),
+# laser.pulse_width_s = 1e-6 at 1e3 Hz 1.5e13 (465 s), 1e11 Hz 3.4e12 (past 90 s)
+MAX_CALIBRATION_WORK = 2**41
+SAMPLE_WORK_TAPS = 2000  # a sample's own work (its noise draw, the discriminator's passes)
 TNR_STEP = 0.5  # tables are computed at TNR multiples of this and interpolated between them
 
 
@@ -87,6 +92,39 @@ def snr_grid(tnr: float) -> np.ndarray:
     """The calibration's SNRs for a threshold at ``tnr`` [1]."""
     lo = max(1.0, tnr - GRID_BELOW_TNR)
     return np.arange(lo, tnr + GRID_ABOVE_TNR + 1e-9, GRID_STEP)
+
+
+def calibration_work(tau_s: float, bandwidth_hz: float, dt_s: float, tnr: float) -> tuple:
+    """(samples, taps): the waveform samples the table of a threshold at ``tnr`` draws, its
+    echoes (the grid's SNRs x WAVEFORMS_PER_SNR) x (the gate's samples + the band limit's
+    2 m + 1 taps), and those taps (each output sample of the filter sums that many) [1]."""
+    del tau_s  # the gate is fixed: the pulse enters through the step
+    sigma_h = 1.0 / (4.0 * math.sqrt(math.pi) * bandwidth_hz)
+    taps = 2 * math.ceil(6.0 * sigma_h / dt_s) + 1  # KERNEL_HALF_WIDTH_SIGMA either side
+    per_echo = 2.0 * GATE_M / C / dt_s + taps
+    return float(len(snr_grid(tnr)) * WAVEFORMS_PER_SNR * per_echo), taps
+
+
+def check_calibration_cost(tau_s: float, bandwidth_hz: float, dt_s: float, tnr: float) -> None:
+    """Refuse (SceneError, one line naming the keys) a table whose waveform samples x (taps +
+    SAMPLE_WORK_TAPS) pass MAX_CALIBRATION_WORK (minutes of work), before any is drawn: a band
+    limit much wider than the step (a 10 ps pulse at 120 MHz: 14,107 taps) or a step much finer
+    than the default (1e11 Hz: 0.5 ps over a 17 ns gate)."""
+    from ...scene import SceneError  # noqa: PLC0415
+
+    samples, taps = max(
+        calibration_work(tau_s, bandwidth_hz, dt_s, tnr + d) for d in (0.0, TNR_STEP)
+    )
+    work = samples * (taps + SAMPLE_WORK_TAPS)
+    if work > MAX_CALIBRATION_WORK:
+        raise SceneError(
+            f"detector.bandwidth_hz = {bandwidth_hz:g} Hz with laser.pulse_width_s = {tau_s:g} s "
+            f"at a time step of {dt_s:.3g} s: the statistical model's gross-error table would "
+            f"filter {samples:.2g} waveform samples through {taps} taps (work {work:.2g}, at "
+            f"most {MAX_CALIBRATION_WORK:.2g}: minutes): give a "
+            "detector.bandwidth_hz nearer 1 / (2 laser.pulse_width_s) or a coarser "
+            "fidelity.time_step_s"
+        )
 
 
 def single_surface_sigma_m(

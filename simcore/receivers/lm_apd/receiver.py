@@ -242,6 +242,7 @@ def _gross_errors(scene, echo, rx: LmApdResponse, r_true_m, r_meas_m, drawn, hol
     in_range = drawn & (rx.snr <= gross.snr_grid(t.tnr + gross.TNR_STEP)[-1])
     if not in_range.any():
         return r_meas_m
+    gross.check_calibration_cost(echo.shape.tau_s, scene.detector.bandwidth_hz, echo.dt_s, t.tnr)
     table = gross.gross_errors_at(
         rx.model, echo.shape.tau_s, echo.shape.a, scene.detector.bandwidth_hz, echo.dt_s,
         echo.cfd_delay_s, t.cfd_fraction, t.tnr, t.resolution_s, holdoff_s,

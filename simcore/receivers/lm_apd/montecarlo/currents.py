@@ -31,13 +31,15 @@ class BandLimit:
         """m, the number of taps either side of the centre."""
         return (len(self.taps) - 1) // 2
 
-    def shifted_taps(self, n_sub: int) -> np.ndarray:
-        """Taps of ``h_B`` delayed by q dt / n_sub, q = 1..n_sub-1: (n_sub - 1, 2 m + 1) [1].
+    def shifted_taps(self, n_sub: int, ends: bool = False) -> np.ndarray:
+        """Taps of ``h_B`` delayed by q dt / n_sub, q = 1..n_sub-1: (n_sub - 1, 2 m + 1) [1];
+        with ``ends`` q = 0..n_sub: (n_sub + 1, 2 m + 1).
 
         With them ``y(t_j + q dt / n_sub) = sum_l taps_q[l] x[j + 2 m - l]`` on the padded input
         ``x`` (the same sum as the sampled output, at a fractional delay)."""
         m = self.half_width
-        lag = np.arange(-m, m + 1)[None, :] + (np.arange(1, n_sub)[:, None] / n_sub)
+        q = np.arange(0, n_sub + 1) if ends else np.arange(1, n_sub)
+        lag = np.arange(-m, m + 1)[None, :] + (q[:, None] / n_sub)
         g = np.exp(-0.5 * (lag * (self.dt_s / self.sigma_h_s)) ** 2)
         norm = np.exp(-0.5 * (np.arange(-m, m + 1) * (self.dt_s / self.sigma_h_s)) ** 2).sum()
         return g / norm

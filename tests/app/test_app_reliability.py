@@ -69,7 +69,8 @@ def test_main_listens_on_loopback_unless_a_host_is_given(monkeypatch):
         def __init__(self, scene, **_):
             pass
 
-        def start(self, host, port, origins=()):
+        def start(self, host, port, origins=(), input_idle_s=None):
+            assert input_idle_s is None  # a --shared server's sessions are its pages: no reaping
             started.append((host, port))
 
     monkeypatch.setattr(main_mod, "LmapdApp", FakeApp)

@@ -234,27 +234,6 @@ def point_to_mesh_m(points_t, vertices_m, faces) -> np.ndarray:
     return np.abs(np.asarray(distance, dtype=np.float64)).reshape(len(points_t))  # (1,) too
 
 
-def near_mesh(points_t, model: TargetModel, tau_m: float, seen_faces) -> np.ndarray:
-    """(n,) bool: each point (target frame) lies within ``tau_m`` of the mesh, exactly.
-
-    Most points lie by the facets the lidar sees: their distance to those (``seen_faces``) is an
-    upper bound of the distance to the mesh, so a point within tau of them is near. The others
-    are measured against every triangle that could be within tau of one of them (one of them
-    lies within tau plus half its bounding box's diagonal of the box's centre), which is all
-    that the answer depends on.
-    """
-    vertices = np.asarray(model.vertices_m, dtype=np.float64)
-    faces = np.asarray(model.faces)
-    near = point_to_mesh_m(points_t, vertices, faces[np.asarray(seen_faces)]) <= tau_m
-    rest = np.flatnonzero(~near)
-    if len(rest):
-        centre_m, half_diagonal_m = model.surface.face_boxes
-        d_m, _ = cKDTree(points_t[rest]).query(centre_m, k=1)
-        could = d_m <= tau_m + half_diagonal_m
-        near[rest] = point_to_mesh_m(points_t[rest], vertices, faces[could]) <= tau_m
-    return near
-
-
 def to_target_frame(points_s, pose: PoseInSensor) -> np.ndarray:
     """Sensor-frame points (n, 3) in the target frame: R^T (p - t)."""
     return (np.asarray(points_s, dtype=np.float64) - pose.translation_m) @ pose.rotation
@@ -276,7 +255,9 @@ def _errors(error_m: np.ndarray) -> dict[str, float | None]:
     }
 
 
-def line_of_sight_errors_m(caster: RayCaster, pose: PoseInSensor, points_t) -> np.ndarray:
+def line_of_sight_errors_m(
+    caster: RayCaster, pose: PoseInSensor, points_t, mesh_m=None
+) -> np.ndarray:
     """(n,) each point's range error along its own line of sight [m]: its distance from the
     lidar less that of the first hit of the ray from the lidar through it (Embree), signed (a
     point in front of the surface is negative). Where that ray misses the mesh (a point beside
@@ -284,7 +265,8 @@ def line_of_sight_errors_m(caster: RayCaster, pose: PoseInSensor, points_t) -> n
 
     Unlike ``range_error_m`` (measured against the energy-weighted truth of the point's own
     surface group), a mixed pixel's point floating between two depths counts with its distance
-    from the surface its line of sight meets."""
+    from the surface its line of sight meets. ``mesh_m``: the points' distances to the mesh, if
+    known (:func:`point_to_mesh_m`)."""
     points_t = np.asarray(points_t, dtype=np.float64)
     if not len(points_t):
         return np.zeros(0)
@@ -299,15 +281,19 @@ def line_of_sight_errors_m(caster: RayCaster, pose: PoseInSensor, points_t) -> n
     error_m = range_m - hit_m
     miss = ~np.isfinite(hit_m)
     if miss.any():
-        error_m[miss] = point_to_mesh_m(points_t[miss], model.vertices_m, model.faces)
+        error_m[miss] = (
+            point_to_mesh_m(points_t[miss], model.vertices_m, model.faces)
+            if mesh_m is None
+            else np.asarray(mesh_m)[miss]
+        )
     return error_m
 
 
-def _distances(points_t, model: TargetModel) -> dict[str, float | None]:
-    """Median and 95th percentile of the points' exact distance to the whole mesh [m]."""
-    if not len(points_t):
+def _distances(d_m: np.ndarray) -> dict[str, float | None]:
+    """Median and 95th percentile of the points' exact distances to the whole mesh ``d_m``
+    [m]."""
+    if not len(d_m):
         return {"distance_to_mesh_median_m": None, "distance_to_mesh_p95_m": None}
-    d_m = point_to_mesh_m(points_t, model.vertices_m, model.faces)
     return {
         "distance_to_mesh_median_m": float(np.median(d_m)),
         "distance_to_mesh_p95_m": float(np.percentile(d_m, 95.0)),
@@ -348,7 +334,10 @@ def quality_metrics(
     attrs = cloud.attributes
     target = ~np.asarray(attrs["is_outlier"], dtype=bool)
     points_t = to_target_frame(cloud.points[target], hits.pose)
-    near = near_mesh(points_t, model, tau_m, hits.visible_faces)
+    # each target point's exact distance to the whole mesh, once (one BVH of the mesh): the
+    # precision's test, the distance figures and the line-of-sight error where a ray misses
+    mesh_m = point_to_mesh_m(points_t, model.vertices_m, model.faces)
+    near = mesh_m <= tau_m
     points_s, face_s, area_m2 = mesh_samples(model, seed, n_samples)
     surface = seen_samples(caster, hits.pose, fov_rad, points_s, face_s, area_m2)
     recalled, recall, recall_projected = recall_figures(points_t, surface, tau_m)
@@ -364,10 +353,10 @@ def quality_metrics(
         "f_score": float(f_score),
         **_errors(error_m),
         "range_rmse_surface_m": _errors(error_m)["range_rmse_m"],
-        "range_rmse_m": _errors(line_of_sight_errors_m(caster, hits.pose, points_t))[
+        "range_rmse_m": _errors(line_of_sight_errors_m(caster, hits.pose, points_t, mesh_m))[
             "range_rmse_m"
         ],
-        **_distances(points_t, model),
+        **_distances(mesh_m),
         **_outliers(attrs, target),
         "point_density_per_m2": _ratio(len(points_t), seen_m2),
         "seen_area_m2": seen_m2,

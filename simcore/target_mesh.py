@@ -113,19 +113,6 @@ class TargetMesh:
         return normals
 
     @cached_property
-    def face_boxes(self) -> tuple[np.ndarray, np.ndarray]:
-        """Each triangle's axis-aligned bounding box as its centre (n_faces, 3) [m] and half its
-        diagonal (n_faces,) [m]: a point within d of a triangle lies within d plus that half
-        diagonal of the centre. Read-only; what every frame's quality figures look up."""
-        tri = self.vertices_m[self.faces]
-        lo, hi = tri.min(axis=1), tri.max(axis=1)
-        centre = 0.5 * (lo + hi)
-        half_diagonal = 0.5 * np.linalg.norm(hi - lo, axis=1)
-        centre.setflags(write=False)
-        half_diagonal.setflags(write=False)
-        return centre, half_diagonal
-
-    @cached_property
     def radius_m(self) -> float:
         """Radius of the bounding sphere about the target origin [m] (every vertex)."""
         return float(np.linalg.norm(self.vertices_m, axis=1).max())

@@ -126,7 +126,7 @@ def atlas_bench_markdown(path: Path = ATLAS_BENCH_JSON) -> str:
         "",
         f"The quality stage of one frame at {fig['quality_pixels']} x {fig['quality_pixels']} px "
         f"(12 attitudes x {len(q['shared']) // 12}, interleaved): {_spread_ms(q['shared'])} with "
-        f"the samples and boxes shared, {_spread_ms(q['anew'])} drawing them anew for each frame "
+        f"the samples shared, {_spread_ms(q['anew'])} drawing them anew for each frame "
         "(as every frame did before).",
         "",
         "| pixels | attitudes | workers | wall time (s) | a frame with its quality figures |",

@@ -6,8 +6,8 @@ figures (never asserted).
 
 1. The quality stage per frame, A against B in one process, interleaved over the same attitudes:
    A as the atlas runs it (the recall's 50,000 area samples of the mesh drawn once per mesh and
-   seed, the facets' bounding boxes once per mesh), B as every frame computed them before (both
-   caches emptied before each B frame). Median and range over ``repeats`` x 12 attitudes.
+   seed), B as every frame drew them before (the cache emptied before each B frame). Median and
+   range over ``repeats`` x 12 attitudes.
 2. The whole atlas at 10 deg (614 attitudes; 30 deg, 62, with --quick) at ``--pixels`` (64,
    then 128, by default) on a Dask LocalCluster of ``--workers`` single-threaded workers, wall
    time from ``run_atlas``'s call to its table, summary, map and scene files written, the
@@ -48,10 +48,8 @@ def _quality_ab(pixels: int, repeats: int) -> dict[str, list[float]]:
             caster = r.caster
             assert caster is not None  # a pipeline's result has its target's caster
             for mode in ("shared", "anew"):
-                model = caster.model
                 if mode == "anew":
                     quality._SAMPLES.clear()
-                    model.surface.__dict__.pop("face_boxes", None)
                 t0 = time.perf_counter()
                 quality.quality_metrics(
                     r.cloud, caster, r.hits, base.receive.fov_rad, base.quality.tau_m, base.seed
@@ -90,7 +88,7 @@ def main(pixels: tuple[int, ...], workers: int, repeats: int, quick: bool, json_
     times = _quality_ab(pixels[0], repeats)
     print(
         f"quality stage per frame at {pixels[0]} px, {len(_ATTITUDES)} attitudes x {repeats}, "
-        f"interleaved: samples and boxes shared {_spread(times['shared'])}, "
+        f"interleaved: samples shared {_spread(times['shared'])}, "
         f"drawn anew (the code before) {_spread(times['anew'])}"
     )
     figures["quality_s"] = times

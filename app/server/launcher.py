@@ -149,13 +149,9 @@ class Launcher:
         path = request.path
         found = routes.SESSION_ID.match(path)
         if request.method not in ("GET", "HEAD"):
-            if found and found["rest"] == "/paraview/" and request.method == "POST":
-                answer = routes.session_manager_answer(
-                    request.headers.get("Origin", ""), found["id"]
-                )
-                if answer is not None:
-                    return web.json_response(answer)
-            else:
+            # trame's page first asks a session manager where to connect (a POST to the
+            # paraview/ beside it, every load); there is none: answered, but not a refusal to log
+            if not (found and found["rest"] == "/paraview/" and request.method == "POST"):
                 self.log.warning(
                     "method", "refused a %s request from %s", "non-GET", request.remote
                 )

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import ipaddress
 import re
-import urllib.parse
 from urllib.parse import quote
 
 from aiohttp import web
@@ -97,18 +96,3 @@ def quoted(text: str) -> str:
 
 def redirect(location: str) -> web.Response:
     return web.Response(status=302, headers={"Location": location, "Cache-Control": "no-store"})
-
-
-def session_manager_answer(origin: str, session_id: str) -> dict[str, str] | None:
-    """What trame's page is told when it asks a session manager where to connect (at every load
-    it POSTs to the ``paraview/`` beside it, wslink's launcher protocol): its session's own
-    websocket, ``ws(s)://HOST:PORT/s/ID/ws`` as the page sees the server (its ``Origin``) --
-    the address the page would fall back to after a refused answer, which logged a 405 in its
-    console at every load. None where the request names no web origin (a refusal then)."""
-    parts = urllib.parse.urlsplit(origin)
-    if parts.scheme not in ("http", "https") or not parts.netloc or parts.path not in ("", "/"):
-        return None
-    if not re.fullmatch(r"[A-Za-z0-9_-]{1,64}", session_id):
-        return None
-    scheme = "wss" if parts.scheme == "https" else "ws"
-    return {"sessionURL": f"{scheme}://{parts.netloc}/s/{session_id}/ws"}

@@ -1,5 +1,9 @@
 """What a study writes: every trial at every envelope point (Parquet), the feasible front (CSV),
-the winning design as scenes (TOML), figures (PNG) and a report in words (Markdown)."""
+the winning design as scenes (TOML), figures (PNG) and a report in words (Markdown).
+
+Over 500 lines: each output of a study beside the others, in the order the report reads them,
+so that a figure's axes and the report's words about it stay one reading apart.
+"""
 
 from __future__ import annotations
 

@@ -43,6 +43,12 @@ def test_the_classroom_views_keys_words_and_links(page, classroom_url):
     wait_settled(page)
 
     # the Geiger-mode chart: the measured counts drawn, inside the time axis, titled as counts
+    # (once the selected pixels' chart has come for this receiver: a loaded machine sends the
+    # frame's picture first and its chart after it)
+    page.wait_for_function(
+        "() => ((window.trame.state.get('waveforms') || {}).data || [{}])[0].type === 'bar'",
+        timeout=60_000,
+    )
     figure = state(page, "waveforms")
     bars = figure["data"][0]
     assert bars["type"] == "bar" and max(bars["y"]) > 0

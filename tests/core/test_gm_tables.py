@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy import special, stats
+from support.ci import skip_unless_ci
 
 import simcore
 from simcore.cache import TableCache
@@ -140,7 +141,7 @@ def test_the_threshold_counts_take_scipy_stats_poisson_isf_steps_exactly():
 
 def test_the_compiled_coates_sums_are_numpys_within_their_rounding():
     if compiled_kernel() is None:
-        pytest.skip("numba unavailable: only the numpy sums run")
+        skip_unless_ci("numba unavailable: only the numpy sums run")
     rng = np.random.default_rng(7)
     alpha, h = rng.random(20_000) ** 3, rng.random(20_000) ** 4
     for n_pulses in (3, 100, 1000):

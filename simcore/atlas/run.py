@@ -28,7 +28,7 @@ from tqdm import tqdm
 from .. import io
 from .._version import __version__
 from ..scene import Scene, SceneError, dump_scene, with_overrides
-from ..sweep.run import _Executor
+from ..sweep.run import _Executor, _is_done
 from ..sweep.spec import CONNECT_TIMEOUT_S, FRAMES_DIR, Frame, Sweep, build_sweep
 from ..sweep.table import _read_row, _row_path
 from .frame import COLUMNS, DEFAULT_METRIC, METRICS, _attitude_task, metric_values, run_attitude
@@ -214,7 +214,7 @@ def run_atlas(
     out = Path(out_dir)
     _prepare(out, atlas, resume)
     frames = atlas.frames
-    pending = [f for f in frames if not _is_done(out, f)]
+    pending = [f for f in frames if not _is_done(out, f, None)]  # the sweep's rule, no clouds
     n_workers = 0
     interrupted = False
     with _Executor(
@@ -308,11 +308,6 @@ def _prepare(out: Path, atlas: Atlas, resume: bool) -> None:
         raise AtlasError(
             f"--out {str(out)!r}: cannot write there ({exc.strerror or exc})"
         ) from None
-
-
-def _is_done(out: Path, frame: Frame) -> bool:
-    row = _read_row(_row_path(out, frame))
-    return row is not None and row.get("status") == "ok"
 
 
 def _record(out: Path, frame: Frame, outcome) -> None:

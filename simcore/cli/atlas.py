@@ -90,9 +90,7 @@ def run_cli(args: argparse.Namespace) -> int:
     from ..atlas import AtlasError, build_atlas, run_atlas  # noqa: PLC0415  (the imaging chain)
 
     check_cluster_options(args)
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise CliError(f"--out {args.out!r} is a file, not a folder")
+    out = Path(args.out)  # a file there, or a folder that cannot be written: run_atlas says so
     scene = scene_from_args(args)
     try:
         atlas = build_atlas(scene, args.step_deg, args.metric, tuple(args.require))

@@ -45,6 +45,7 @@ from .search import (
     load_records,
     pareto_front,
     polish,
+    polish_front,
     search,
     to_confirm,
 )
@@ -171,6 +172,10 @@ def run(
                 best = polish(study, best, evaluator, state, out, cache)
             candidates = [r for r in state.records if r.stage in ("screen", "polish")]
             front = _front(study, candidates)
+            if len(study.minimize) > 1:  # the front's designs bisected onto it, then drawn again
+                polish_front(study, front, evaluator, state, out, cache)
+                candidates = [r for r in state.records if r.stage in ("screen", "polish")]
+                front = _front(study, candidates)
             confirmed = confirm(study, to_confirm(study, front), evaluator, state, out, cache)
     finally:
         bar.close()

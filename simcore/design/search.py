@@ -361,14 +361,23 @@ def search(
 # ----------------------------------------------------------------------------------------------
 # polish and confirm
 # ----------------------------------------------------------------------------------------------
-def polish_variables(study: Study) -> list[Variable]:
-    """The continuous variables the (single) objective grows with: the objective itself, a cost
+MAX_FRONT_POLISH = 6  # [-] front designs polished at most (spread along it), several objectives
+
+
+def objective_variables(study: Study, name: str) -> list[Variable]:
+    """The continuous variables the objective ``name`` grows with: the objective itself, a cost
     term, or what a derived cost figure is made of."""
-    if len(study.minimize) != 1:
-        return []
-    names = set(study.cost) if study.minimize[0] == "cost" else {study.minimize[0]}
+    names = set(study.cost) if name == "cost" else {name}
     keys = {DERIVED_FROM.get(n, n) for n in names}
     return [v for v in study.variables if v.continuous and v.key in keys]
+
+
+def polish_variables(study: Study) -> list[Variable]:
+    """The continuous variables the (single) objective grows with (none with several: the front
+    is polished instead, :func:`polish_front`)."""
+    if len(study.minimize) != 1:
+        return []
+    return objective_variables(study, study.minimize[0])
 
 
 def cheapest(records: Sequence[Record]) -> Record | None:
@@ -377,13 +386,14 @@ def cheapest(records: Sequence[Record]) -> Record | None:
     return min(ok, key=lambda r: (r.objectives[0], r.number)) if ok else None
 
 
-def polish(study: Study, best: Record, evaluator, state, out, cache) -> Record:
+def polish(study: Study, best: Record, evaluator, state, out, cache, variables=None) -> Record:
     """Bisect each polish variable of the cheapest feasible design between its lower bound and
     its value (log scale where the variable has one), the other variables held, for
     ``polish_steps`` evaluations: feasibility is taken as monotone in a cost variable (more
-    energy, a larger aperture never hurt), so the bisection closes on the least feasible value."""
+    energy, a larger aperture never hurt), so the bisection closes on the least feasible value.
+    ``variables``: those to bisect (default: :func:`polish_variables` of the one objective)."""
     current = best
-    for v in polish_variables(study):
+    for v in polish_variables(study) if variables is None else variables:
         assert v.low is not None  # continuous: bounds
         lo, hi = v.low, float(current.params[v.key])
         if hi <= lo:
@@ -406,6 +416,28 @@ def polish(study: Study, best: Record, evaluator, state, out, cache) -> Record:
             else:
                 lo = mid
     return current
+
+
+def polish_front(study: Study, front: Sequence[Record], evaluator, state, out, cache) -> None:
+    """With several objectives: bisect each front design (up to ``MAX_FRONT_POLISH``, spread
+    along the front) along the continuous variables of each objective in turn, the others held,
+    as :func:`polish` does for one objective. A screened design is only near the front; each of
+    its polished twins lies on it (no feasible design of the same other variables costs less in
+    that objective), so the front drawn from them is a front, not a scatter above it, with up to
+    one point per objective for each design polished; a design bisected down to the lower bounds
+    of one objective's variables is bisected along the others' too. At most ``polish_steps + 1``
+    evaluations per design and objective polished."""
+    if len(study.minimize) < 2 or study.polish_steps == 0 or not front:
+        return
+    n = min(len(front), MAX_FRONT_POLISH)
+    picks = sorted({round(i * (len(front) - 1) / max(n - 1, 1)) for i in range(n)})
+    along = [objective_variables(study, name) for name in study.minimize]
+    for k, variables in enumerate(along):
+        for i in picks if variables else ():
+            rec = polish(study, front[i], evaluator, state, out, cache, variables)
+            if all(float(rec.params[v.key]) <= v.low for v in variables):  # at its bounds: the
+                for other in along[:k] + along[k + 1 :]:  # other costs bring it onto the front
+                    rec = polish(study, rec, evaluator, state, out, cache, other)
 
 
 def pareto_front(records: Sequence[Record]) -> list[Record]:

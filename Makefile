@@ -11,7 +11,7 @@ JS_FILES := $(wildcard app/static/*.js)
 # named here as a development one: one imported from the folder it scans is an error)
 extras_but = $(shell $(BIN)/python -c 'import sys, tomllib; x = tomllib.load(open("pyproject.toml", "rb"))["project"]["optional-dependencies"]; print(",".join(e for e in x if e not in sys.argv[1:]))' $(1))
 
-.PHONY: app test bench soak lint docs format chromium clean
+.PHONY: app test test-fast bench soak lint docs format chromium clean
 
 # The first run creates .venv and installs the project and its dependencies into it (about
 # 3 minutes with a fast connection: numpy, scipy, VTK and trame are large); later runs start at once.
@@ -42,6 +42,12 @@ app: $(STAMP)
 TEST_WORKERS ?= 2
 test: $(STAMP) chromium
 	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder
+
+## make test-fast: the edit-test loop: every test but the browser tests and those marked slow
+## (pytest -m "not browser and not slow"; the markers: pyproject.toml), no Chromium needed.
+## `make test` still runs everything; CI runs that
+test-fast: $(STAMP)
+	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder -m "not browser and not slow"
 
 ## make bench: the core's stage timings (docs/performance.md)
 bench: $(STAMP)

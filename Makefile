@@ -7,8 +7,11 @@ HOST ?= 127.0.0.1
 PORT ?= 8080
 LINT_PATHS := simcore app tests scripts assets docs/hooks setup.py
 JS_FILES := $(wildcard app/static/*.js)
+# the optional extras of pyproject.toml but those named, comma-separated (deptry takes an extra
+# named here as a development one: one imported from the folder it scans is an error)
+extras_but = $(shell $(BIN)/python -c 'import sys, tomllib; x = tomllib.load(open("pyproject.toml", "rb"))["project"]["optional-dependencies"]; print(",".join(e for e in x if e not in sys.argv[1:]))' $(1))
 
-.PHONY: app test bench soak lint docs format chromium clean
+.PHONY: app test test-fast bench soak lint docs format chromium clean
 
 # The first run creates .venv and installs the project and its dependencies into it (about
 # 3 minutes with a fast connection: numpy, scipy, VTK and trame are large); later runs start at once.
@@ -40,6 +43,12 @@ TEST_WORKERS ?= 2
 test: $(STAMP) chromium
 	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder
 
+## make test-fast: the edit-test loop: every test but the browser tests and those marked slow
+## (pytest -m "not browser and not slow"; the markers: pyproject.toml), no Chromium needed.
+## `make test` still runs everything; CI runs that
+test-fast: $(STAMP)
+	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder -m "not browser and not slow"
+
 ## make bench: the core's stage timings (docs/performance.md)
 bench: $(STAMP)
 	$(BIN)/lmapd bench
@@ -49,11 +58,19 @@ soak: $(STAMP) chromium
 	$(BIN)/python scripts/soak_app.py
 
 ## make lint: what CI checks before the tests: ruff (lint, unused noqa, format), mypy on simcore/,
-## and the page's scripts parsed by Node.js (node --check; Debian's nodejs)
+## the import layers (import-linter's contracts, [tool.importlinter] in pyproject.toml), the
+## dependencies (deptry, [tool.deptry]: every import declared and every dependency used; simcore/
+## imports the core only, app/ the core and the app extra, scripts/ and tests/ not the docs') and the page's scripts parsed by Node.js
+## (node --check; Debian's nodejs). tests/test_import_layout.py and tests/test_dependencies.py
+## run the same two checks in `make test`.
 lint: $(STAMP)
 	$(BIN)/ruff check $(LINT_PATHS)
 	$(BIN)/ruff format --check $(LINT_PATHS)
 	$(BIN)/mypy
+	$(BIN)/lint-imports --no-cache --no-logo
+	$(BIN)/deptry simcore app scripts $(wildcard validation) tests $(filter-out %__pycache__/,$(wildcard tests/*/))
+	$(BIN)/deptry simcore --optional-dependencies-dev-groups $(call extras_but)
+	$(BIN)/deptry app --optional-dependencies-dev-groups $(call extras_but,app) --ignore DEP002
 	@for f in $(JS_FILES); do node --check $$f || exit 1; done; echo "node --check: $(words $(JS_FILES)) scripts parse"
 
 ## make docs: the documentation site (docs/, MkDocs Material) built offline into site/; a broken

@@ -40,8 +40,8 @@ from app.ui.layout import build_layout
 
 _server_ids = itertools.count()
 # Sessions forked from one preloaded parent (app.server.zygote) where the system forks cleanly:
-# 30 of them held 3.0 GB against 7.1 GB as processes of their own, and a new one had its first
-# frame in 0.8-1.4 s against 2.1 s (scripts/bench_session_memory.py, docs/serving.md)
+# they hold a fraction of the memory of processes of their own and start sooner (the figures:
+# docs/serving.md, "How many students a machine holds"; scripts/bench_session_memory.py)
 FORK_BY_DEFAULT = sys.platform.startswith("linux")
 
 

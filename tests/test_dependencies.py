@@ -1,21 +1,28 @@
-"""Every third-party import is a declared dependency (issue 29), and the app refuses, with one
-message, a trame-server or wslink outside the range its patches were checked against.
+"""Every third-party import is a declared dependency and every dependency is used (issue 29; read by
+deptry since issue 44), and the app refuses, with one message, a trame-server or wslink outside the
+range its patches were checked against.
 
-The imports are read from the source (``ast``: every ``import``, those inside functions too) and
-mapped to their distributions through the installed metadata; ``simcore/`` may import only the core
-dependencies, ``app/`` the core and the ``app`` extra, ``tests/`` those and the ``test`` extra.
+deptry reads every ``import`` (those inside functions too) and the declarations of pyproject.toml
+(``[tool.deptry]``); :func:`deptry_runs` are the three runs of ``make lint``: the whole project
+(scripts/ and tests/ included) imports only declared dependencies, not the docs extra, and leaves
+none unused; simcore/
+imports only the core ones (every extra counts as a development one there) and uses each of them;
+app/ imports the core and the ``app`` extra. What deptry does not say stays here: a lower bound on
+every declaration, and the framework fence of app/server/versions.py.
 """
 
 from __future__ import annotations
 
-import ast
 import re
+import subprocess
 import sys
 import tomllib
 from importlib import metadata
 from pathlib import Path
 
 import pytest
+from packaging.requirements import Requirement
+from packaging.specifiers import SpecifierSet
 
 import app.server.versions
 import simcore.cli
@@ -28,107 +35,68 @@ from app.server.versions import (
 
 ROOT = Path(__file__).resolve().parent.parent
 PROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
-LOCAL = {"simcore", "app", "support", "conftest", "setup"}
 
 
-def normalized(name: str) -> str:
-    """A distribution name as the index compares them (PEP 503)."""
-    return re.sub(r"[-_.]+", "-", name).lower()
+def extras_but(*names: str) -> str:
+    """The optional extras of pyproject.toml but ``names``, comma-separated (the Makefile's
+    ``extras_but``)."""
+    return ",".join(e for e in PROJECT["optional-dependencies"] if e not in names)
 
 
-def requirement_name(requirement: str) -> tuple[str, list[str]]:
-    """``"dask[distributed]>=2024.1"`` -> ``("dask", ["distributed"])``."""
-    found = re.match(r"\s*([A-Za-z0-9][A-Za-z0-9._-]*)\s*(?:\[([^\]]*)\])?", requirement)
-    assert found, requirement
-    extras = [e.strip() for e in (found.group(2) or "").split(",") if e.strip()]
-    return normalized(found.group(1)), extras
+def deptry_runs() -> dict[str, list[str]]:
+    """The deptry runs of ``make lint`` (the Makefile's ``lint``), by what they check.
+
+    The test folders are roots of their own because pytest puts each on ``sys.path`` (a test
+    imports its neighbour by name); ``validation/`` is scanned where it exists.
+    """
+    tests = sorted(
+        f"tests/{p.name}/"
+        for p in (ROOT / "tests").iterdir()
+        if p.is_dir() and p.name != "__pycache__"
+    )
+    validation = ["validation"] if (ROOT / "validation").is_dir() else []
+    return {
+        "all declared, none unused": ["simcore", "app", "scripts", *validation, "tests", *tests],
+        "simcore: the core only": [
+            *("simcore", "--optional-dependencies-dev-groups", extras_but()),
+        ],
+        "app: the core and the app extra": [
+            *("app", "--optional-dependencies-dev-groups", extras_but("app")),
+            *("--ignore", "DEP002"),  # the core is the library's; app/ need not use all of it
+        ],
+    }
 
 
-def extra_requirements(distribution: str, extra: str) -> set[str]:
-    """The distributions that ``distribution[extra]`` adds (from its installed metadata)."""
-    names = set()
-    for line in metadata.requires(distribution) or []:
-        requirement, _, marker = line.partition(";")
-        if re.search(rf"extra\s*==\s*['\"]{re.escape(extra)}['\"]", marker):
-            names.add(requirement_name(requirement)[0])
-    return names
+def deptry(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "deptry", "--no-ansi", "--config", str(ROOT / "pyproject.toml")]
+        + list(args),
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+    )
 
 
-def declared(*groups: str) -> set[str]:
-    """The distributions declared by ``groups`` ("core" or an extra's name), extras followed."""
-    names = set()
-    for group in groups:
-        extra = group != "core"
-        for line in PROJECT["optional-dependencies"][group] if extra else PROJECT["dependencies"]:
-            name, extras = requirement_name(line)
-            names.add(name)
-            for extra in extras:
-                names |= extra_requirements(name, extra)
-    return names
+@pytest.mark.parametrize("run", sorted(deptry_runs()))
+def test_deptry_finds_no_dependency_issue(run):
+    done = deptry(*deptry_runs()[run])
+    assert done.returncode == 0, done.stdout + done.stderr
 
 
-def third_party_imports(folder: str) -> dict[str, str]:
-    """Top-level module imported under ``folder`` -> one file that imports it (neither the standard
-    library nor the project's own)."""
-    found: dict[str, str] = {}
-    paths = sorted((ROOT / folder).rglob("*.py"))
-    local = LOCAL | {p.stem for p in paths}  # tests import their neighbours by name
-    for path in paths:
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-            if isinstance(node, ast.Import):
-                names = [alias.name for alias in node.names]
-            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-                names = [node.module]
-            else:
-                continue
-            for name in names:
-                top = name.split(".")[0]
-                if top not in sys.stdlib_module_names and top not in local:
-                    found.setdefault(top, str(path.relative_to(ROOT)))
-    return found
-
-
-def module_providers() -> dict[str, list[str]]:
-    """Top-level module -> the distributions that provide it: ``packages_distributions`` plus the
-    single-file extension modules it misses on Python 3.11 (``small_gicp.cpython-311-....so`` at
-    the top of a wheel without top_level.txt reads there as a module named up to ``.so``)."""
-    providers = {k: list(v) for k, v in metadata.packages_distributions().items()}
-    for dist in metadata.distributions():
-        for f in dist.files or ():
-            if len(f.parts) == 1 and f.name.endswith((".so", ".pyd")):
-                providers.setdefault(f.name.split(".")[0], []).append(dist.metadata["Name"])
-    return providers
-
-
-def undeclared(folder: str, *groups: str) -> list[str]:
-    """The imports of ``folder`` that no distribution declared by ``groups`` provides."""
-    providers = module_providers()
-    allowed = declared(*groups)
-    missing = []
-    for module, where in sorted(third_party_imports(folder).items()):
-        dists = {normalized(d) for d in providers.get(module, [])}
-        if not dists & allowed:
-            missing.append(f"{module} ({where}; from {sorted(dists) or 'nothing installed'})")
-    return missing
-
-
-def test_the_physics_library_imports_only_core_dependencies():
-    assert undeclared("simcore", "core") == []
-
-
-def test_the_app_imports_only_core_and_app_dependencies():
-    assert undeclared("app", "core", "app") == []
-
-
-def test_the_tests_import_only_declared_dependencies():
-    assert undeclared("tests", "core", "app", "test") == []
-
-
-def test_the_import_reader_sees_imports_inside_functions():
-    # a function-level import (point_to_mesh_m-style lazy imports) counts like a top-level one
-    imports = third_party_imports("simcore")
-    assert "numba" in imports  # imported inside a try in simcore/echo/kernel.py
-    assert "msgpack" in third_party_imports("app")
+def test_deptry_finds_an_app_import_an_undeclared_one_and_an_unused_dependency(tmp_path):
+    """The library run, on a library of one module whose function imports trame (the app extra's)
+    and requests (declared by nobody here): both found, and every core dependency unused."""
+    (tmp_path / "simcore").mkdir()
+    (tmp_path / "simcore" / "late.py").write_text(
+        "def f():\n    import trame\n    import requests\n"
+    )
+    args = deptry_runs()["simcore: the core only"]
+    done = deptry(*args, cwd=tmp_path)
+    said = done.stdout + done.stderr
+    assert done.returncode == 1
+    assert "simcore/late.py:2:12: DEP004 'trame' imported but declared as a dev dependency" in said
+    assert "simcore/late.py:3:12: DEP003 'requests'" in said
+    assert "DEP002 'numpy' defined as a dependency but not used" in said
 
 
 def test_every_declared_dependency_has_a_lower_bound():
@@ -140,10 +108,10 @@ def test_every_declared_dependency_has_a_lower_bound():
 
 @pytest.mark.parametrize("name", sorted(CHECKED_RANGES))
 def test_patched_frameworks_are_declared_with_the_checked_range(name):
-    low, high = CHECKED_RANGES[name]
-    (line,) = [x for x in PROJECT["optional-dependencies"]["app"] if requirement_name(x)[0] == name]
-    specifiers = {s.strip() for s in line.split(";")[0][len(name) :].split(",")}
-    assert specifiers == {f">={low}", f"<{high}"}
+    (requirement,) = [
+        r for r in map(Requirement, PROJECT["optional-dependencies"]["app"]) if r.name == name
+    ]
+    assert requirement.specifier == SpecifierSet(CHECKED_RANGES[name])
 
 
 def test_the_patches_name_releases_within_the_checked_ranges():
@@ -156,12 +124,34 @@ def test_the_patches_name_releases_within_the_checked_ranges():
         for name, version in re.findall(r"\b(trame-server|wslink) (\d+\.\d+(?:\.\d+)?)\b", text):
             named.append((path.name, name, version))
     assert {n for _, n, _ in named} == set(CHECKED_RANGES)  # each patched framework is named
-    outside = [(f, n, v) for f, n, v in named if not in_range(v, *CHECKED_RANGES[n])]
+    outside = [(f, n, v) for f, n, v in named if not in_range(v, CHECKED_RANGES[n])]
     assert outside == []
+
+
+@pytest.mark.parametrize(
+    ("version", "inside"),
+    [
+        ("2.6.0", True),
+        ("2.6.9", True),
+        ("2.6.1rc1", True),  # a pre-release inside the range
+        ("2.7rc1", False),  # a pre-release of 2.7 is not below 2.7
+        ("2.7.0", False),
+        ("2.5.9", False),
+        ("not a version", False),
+    ],
+)
+def test_the_fence_reads_versions_as_pep_440_does(version, inside):
+    assert in_range(version, ">=2.6.0,<2.7") is inside
 
 
 def test_the_installed_frameworks_are_in_the_checked_range():
     check_framework_versions()
+
+
+def inside_version(name: str) -> str:
+    """The lowest release of ``name``'s checked range (its ``>=`` bound)."""
+    (low,) = [s.version for s in SpecifierSet(CHECKED_RANGES[name]) if s.operator == ">="]
+    return low
 
 
 @pytest.mark.parametrize(
@@ -169,7 +159,7 @@ def test_the_installed_frameworks_are_in_the_checked_range():
     [("trame-server", "4.2.0"), ("trame-server", "4.0.9"), ("wslink", "2.7.1"), ("wslink", "3.0")],
 )
 def test_a_framework_outside_its_range_is_refused_by_name(name, version):
-    installed = {n: low for n, (low, _) in CHECKED_RANGES.items()} | {name: version}
+    installed = {n: inside_version(n) for n in CHECKED_RANGES} | {name: version}
     with pytest.raises(FrameworkVersionError, match=rf"{name} {re.escape(version)} is installed"):
         check_framework_versions(installed.__getitem__)
 

@@ -14,6 +14,7 @@ connection cap), ``guard`` (the wslink hello and the calls a page may make), ``b
 memory caps of chunked messages) and ``client_values`` (what a page may write); ``connections``
 the guarded listening sites (idle and partial connections, connections per address); ``sync``
 the per-page state synchronisation that replaces trame's; ``versions`` the framework releases
-the patches were checked against, and the check made at start (standard library only: this
-package's ``__init__`` imports nothing, so that the check runs before any patch is loaded).
+the patches were checked against, and the check made at start (the standard library and
+``packaging`` only: this package's ``__init__`` imports nothing, so that the check runs before any
+patch is loaded).
 """

@@ -51,7 +51,7 @@ soak: $(STAMP) chromium
 ## make validate: the echo stage checked against Mitsuba 3 with mitransient (docs/validation.md):
 ## installs the validate extra (Mitsuba's LLVM variant needs libLLVM >= 16: Debian's libllvm19,
 ## installed here when run as root), renders the plates and the MRO, compares them with the
-## echo stage and writes docs/data/validation.json (about 10 minutes on two cores). Not part of
+## echo stage and writes docs/data/validation.json (about 5 minutes on two cores). Not part of
 ## make test.
 ##   make validate DRJIT_LIBLLVM_PATH=/path/to/libLLVM.so    another LLVM
 VALIDATE_STAMP := $(VENV)/.validate-stamp

@@ -5,13 +5,13 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 HOST ?= 127.0.0.1
 PORT ?= 8080
-LINT_PATHS := simcore app tests scripts assets docs/hooks setup.py
+LINT_PATHS := simcore app tests scripts assets docs/hooks validation setup.py
 JS_FILES := $(wildcard app/static/*.js)
 # the optional extras of pyproject.toml but those named, comma-separated (deptry takes an extra
 # named here as a development one: one imported from the folder it scans is an error)
 extras_but = $(shell $(BIN)/python -c 'import sys, tomllib; x = tomllib.load(open("pyproject.toml", "rb"))["project"]["optional-dependencies"]; print(",".join(e for e in x if e not in sys.argv[1:]))' $(1))
 
-.PHONY: app test test-fast bench soak lint docs format chromium clean
+.PHONY: app test test-fast bench soak lint docs format chromium clean validate
 
 # The first run creates .venv and installs the project and its dependencies into it (about
 # 3 minutes with a fast connection: numpy, scipy, VTK and trame are large); later runs start at once.
@@ -57,6 +57,31 @@ bench: $(STAMP)
 soak: $(STAMP) chromium
 	$(BIN)/python scripts/soak_app.py
 
+## make validate: the echo stage checked against Mitsuba 3 with mitransient (docs/validation.md):
+## installs the validate extra (Mitsuba's LLVM variant needs libLLVM >= 16: Debian's libllvm19,
+## installed here when run as root), renders the plates and the MRO, compares them with the
+## echo stage and writes docs/data/validation.json (about 5 minutes on two cores). Not part of
+## make test.
+##   make validate DRJIT_LIBLLVM_PATH=/path/to/libLLVM.so    another LLVM
+VALIDATE_STAMP := $(VENV)/.validate-stamp
+LIBLLVM := /usr/lib/x86_64-linux-gnu/libLLVM-19.so
+DRJIT_LIBLLVM_PATH ?= $(LIBLLVM)
+$(VALIDATE_STAMP): $(STAMP)
+	$(BIN)/pip install --quiet -e '.[app,test,docs,validate]'
+	@touch $(VALIDATE_STAMP)
+
+validate: $(VALIDATE_STAMP)
+	@if [ ! -e "$(DRJIT_LIBLLVM_PATH)" ]; then \
+		if [ "$(DRJIT_LIBLLVM_PATH)" = "$(LIBLLVM)" ] && [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+			echo "installing Debian's libllvm19 for Mitsuba's LLVM variant"; \
+			apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libllvm19 >/dev/null; \
+		else \
+			echo "Mitsuba's LLVM variant needs libLLVM 16 or newer, not found at $(DRJIT_LIBLLVM_PATH): sudo apt-get install libllvm19, or make validate DRJIT_LIBLLVM_PATH=/path/to/libLLVM.so"; \
+			exit 1; \
+		fi; \
+	fi
+	DRJIT_LIBLLVM_PATH=$(DRJIT_LIBLLVM_PATH) $(BIN)/python -m validation
+
 ## make lint: what CI checks before the tests: ruff (lint, unused noqa, format), mypy on simcore/,
 ## the import layers (import-linter's contracts, [tool.importlinter] in pyproject.toml), the
 ## dependencies (deptry, [tool.deptry]: every import declared and every dependency used; simcore/
@@ -71,6 +96,7 @@ lint: $(STAMP)
 	$(BIN)/deptry simcore app scripts $(wildcard validation) tests $(filter-out %__pycache__/,$(wildcard tests/*/))
 	$(BIN)/deptry simcore --optional-dependencies-dev-groups $(call extras_but)
 	$(BIN)/deptry app --optional-dependencies-dev-groups $(call extras_but,app) --ignore DEP002
+	$(if $(wildcard validation),$(BIN)/deptry validation --optional-dependencies-dev-groups $(call extras_but,validate) --ignore DEP002)
 	@for f in $(JS_FILES); do node --check $$f || exit 1; done; echo "node --check: $(words $(JS_FILES)) scripts parse"
 
 ## make docs: the documentation site (docs/, MkDocs Material) built offline into site/; a broken

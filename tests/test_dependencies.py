@@ -64,6 +64,16 @@ def deptry_runs() -> dict[str, list[str]]:
             *("app", "--optional-dependencies-dev-groups", extras_but("app")),
             *("--ignore", "DEP002"),  # the core is the library's; app/ need not use all of it
         ],
+        **(
+            {  # make validate's check: the core and the validate extra (Mitsuba, mitransient)
+                "validation: the core and the validate extra": [
+                    *("validation", "--optional-dependencies-dev-groups", extras_but("validate")),
+                    *("--ignore", "DEP002"),
+                ]
+            }
+            if validation
+            else {}
+        ),
     }
 
 

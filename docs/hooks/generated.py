@@ -12,7 +12,10 @@ A page asks for one with a marker on a line of its own:
     with the machine and the date it ran on;
 ``<!-- generated: atlas-bench -->``
     the atlas's costs from the ``lmapd bench --atlas --json`` run committed as
-    ``docs/data/atlas_bench.json``.
+    ``docs/data/atlas_bench.json``;
+``<!-- generated: validation -->``
+    the echo stage against Mitsuba 3 with mitransient, from the ``make validate`` run committed
+    as ``docs/data/validation.json``.
 
 The same functions serve the tests (``tests/test_docs.py``), which check that every key and every
 command appears. Not part of the site (``exclude_docs`` in mkdocs.yml).
@@ -31,6 +34,7 @@ from simcore.scene import key_reference
 DOCS = Path(__file__).resolve().parent.parent
 BENCH_JSON = DOCS / "data" / "bench.json"
 ATLAS_BENCH_JSON = DOCS / "data" / "atlas_bench.json"
+VALIDATION_JSON = DOCS / "data" / "validation.json"
 MARKER = re.compile(r"^<!-- generated: ([a-z-]+) -->$", re.MULTILINE)
 FRAME_STAGES = ("hits", "echo", "background", "receiver", "detection", "cloud")
 
@@ -145,11 +149,80 @@ def atlas_bench_markdown(path: Path = ATLAS_BENCH_JSON) -> str:
     return "\n".join(lines)
 
 
+def _g(value, digits: int = 2) -> str:
+    return "-" if value is None else f"{value:.{digits}g}"
+
+
+def _scene_title(name: str, scene: dict) -> str:
+    if "incidence_deg" in scene:
+        return f"plate, {scene['incidence_deg']:g} deg"
+    return name.upper() if name == "mro" else name
+
+
+def _fidelity_title(name: str, f: dict) -> str:
+    rays = f"{f['subrays']} sub-ray" + ("s" if f["subrays"] > 1 else "")
+    if f.get("refine_subrays"):
+        rays += f", {f['refine_subrays']} at mixed pixels"
+    return f"{name} ({rays})"
+
+
+def validation_markdown(path: Path = VALIDATION_JSON) -> str:
+    """The committed ``make validate`` run: per scene and simcore fidelity, lit pixels, energy,
+    echo timing and the whole target's echo against Mitsuba 3 with mitransient."""
+    fig = json.loads(path.read_text(encoding="utf-8"))
+    machine = fig.get("machine", {})
+    lines = [
+        f"Run on {fig['date_utc']} (UTC), {machine.get('cpu', '?')}, {machine.get('cpus', '?')} "
+        f"CPUs, 1-minute load average {fig['load_average_before']:.1f} before the run: Mitsuba "
+        f"{fig['mitsuba']} ({fig['variant']}), mitransient {fig['mitransient']}, "
+        f"{fig['pixels']} x {fig['pixels']} px at {fig['distance_m']:g} m; "
+        f"{fig['steady_samples_per_pixel']} stratified samples per pixel for the energies, "
+        f"{fig['transient_spp']} for the echoes; {fig['wall_s'] / 60:.0f} minutes in all. "
+        "Differences are absolute, Mitsuba's figure less simcore's; *max* over the interior "
+        "pixels, *p95* over all the pixels both light.",
+        "",
+        "| scene | simcore | lit pixels simcore / Mitsuba (Mitsuba's alone: their energy share) "
+        "| energy, relative: max (p95) | mean delay: max (p95) [ps] "
+        "| half-max time: max (p95) [ps] "
+        "| whole echo rms simcore / Mitsuba / closed form [ps] |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for name, scene in fig["scenes"].items():
+        for fidelity, f in scene["fidelity"].items():
+            lit, whole = f["lit"], f["whole_echo"]
+            alone = f" ({lit['only_b']}: {_g(lit['only_b_energy_share'])})" if lit["only_b"] else ""
+            mean, half = f["mean_delay_ps"], f["t_half_ps"]
+            closed = whole.get("closed_form_rms_ps")
+            lines.append(
+                f"| {_scene_title(name, scene)} | {_fidelity_title(fidelity, f)} "
+                f"| {lit['a']} / {lit['b']}{alone} "
+                f"| {_g(f['energy_interior']['max'])} ({_g(f['energy_lit_both']['p95'])}) "
+                f"| {_g(mean['interior']['max'])} ({_g(mean['lit_both']['p95'])}) "
+                f"| {_g(half['interior']['max'])} ({_g(half['lit_both']['p95'])}) "
+                f"| {whole['simcore_rms_ps']:.1f} / {whole['mitsuba_rms_ps']:.1f} / "
+                f"{'-' if closed is None else f'{closed:.1f}'} |"
+            )
+    multi = fig.get("multi_bounce_mro")
+    if multi:
+        parts = [
+            f"albedo {albedo}: {100 * (m['depth_3']['energy_ratio'] - 1):+.2f} % with a second "
+            f"bounce, {100 * (m['depth_16']['energy_ratio'] - 1):+.2f} % with up to 15"
+            for albedo, m in multi.items()
+        ]
+        lines += [
+            "",
+            "Light that bounces more than once, the MRO's whole echo energy against the single "
+            "bounce (Mitsuba's path tracer): " + "; ".join(parts) + ".",
+        ]
+    return "\n".join(lines)
+
+
 GENERATORS = {
     "scene-keys": scene_keys_markdown,
     "cli": cli_markdown,
     "bench": bench_markdown,
     "atlas-bench": atlas_bench_markdown,
+    "validation": validation_markdown,
 }
 
 

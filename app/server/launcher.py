@@ -16,11 +16,15 @@ port) and proxies everything under ``/s/<session id>/`` to it:
   even when the link was opened from another site); the page keeps the token for its share
   links and then shows only ``/`` in the address bar (app/static/link.js), so a reload
   or a shared link always opens a new session;
-* under ``/s/<id>/`` only GET and HEAD, and the websocket at ``/s/<id>/ws`` (trame's page builds
-  it from its own path), are passed to that session's process, with the process's own private
-  token (given on its stdin, never on a command line) and origin; the websocket's ``Origin`` and
-  the session's cookie are checked first, and frames are limited to wslink's chunk size (the
-  process reassembles messages within ``app.server.security``'s limits and screens every call);
+* a session's id is 128 random bits in lowercase hex (trame's client lowercases the address it
+  is told to connect to); trame's page asks where to connect at every load (a POST to
+  ``/s/<id>/paraview/``, wslink's launcher protocol) and is told its session's websocket,
+  ``/s/<id>/ws`` of the address it was loaded from (``index_page.session_manager_answer``);
+* under ``/s/<id>/`` only GET and HEAD, and the websocket at ``/s/<id>/ws``, are passed to that
+  session's process, with the process's own private token (given on its stdin, never on a
+  command line) and origin; the websocket's ``Origin`` and the session's cookie are checked
+  first, and frames are limited to wslink's chunk size (the process reassembles messages within
+  ``app.server.security``'s limits and screens every call);
 * an unknown or ended session gets a page saying so, with a link that starts a new one; over the
   caps (``Caps``: sessions, the processes' total memory, sessions per browser and per address) a
   503 page says how many are open;
@@ -57,7 +61,7 @@ import aiohttp
 from aiohttp import web
 
 from app.logic import upload_folders
-from app.server import connections, headers, pages, proxy, routes, security
+from app.server import connections, headers, index_page, pages, proxy, routes, security
 from app.server.caps import FORKED_SESSION_BYTES as FORKED_SESSION_BYTES
 from app.server.caps import MAX_DEFAULT_SESSIONS as MAX_DEFAULT_SESSIONS
 from app.server.caps import MEMORY_SHARE as MEMORY_SHARE
@@ -148,13 +152,9 @@ class Launcher:
         websocket = request.headers.get("Upgrade", "").lower() == "websocket"
         path = request.path
         found = routes.SESSION_ID.match(path)
-        if request.method not in ("GET", "HEAD"):
-            # trame's page first asks a session manager where to connect (a POST to the
-            # paraview/ beside it, every load); there is none: answered, but not a refusal to log
-            if not (found and found["rest"] == "/paraview/" and request.method == "POST"):
-                self.log.warning(
-                    "method", "refused a %s request from %s", "non-GET", request.remote
-                )
+        probe = bool(found) and routes.is_session_manager_probe(request.method, found["rest"])
+        if request.method not in ("GET", "HEAD") and not probe:
+            self.log.warning("method", "refused a %s request from %s", "non-GET", request.remote)
             return web.Response(status=405, text="Method not allowed\n")
         if found:  # a session's own cookie lets in, not the token
             return await self.in_session(request, found, websocket)
@@ -205,7 +205,7 @@ class Launcher:
             return self.refuse(request, problem)
         # the tab hears at once that its session is starting (a process may take seconds when a
         # class opens together); its cookies are made now and the way in is sent when it listens
-        session_id = secrets.token_urlsafe(16)
+        session_id = routes.new_session_id()
         secret = secrets.token_urlsafe(32)
         page = web.StreamResponse(status=200, headers=NO_STORE)
         page.content_type = "text/html"
@@ -299,6 +299,9 @@ class Launcher:
             self.log.warning("foreign", "refused a request for another browser's session")
             return pages.foreign_session()
         rest = found["rest"]
+        if routes.is_session_manager_probe(request.method, rest):
+            # trame's page asks where to connect, at every load (wslink's launcher protocol)
+            return index_page.session_manager_response(routes.session_manager_answer(session_id))
         if rest is None:  # /s/<id> -> /s/<id>/ (the page's relative addresses need the slash)
             query = request.query_string
             return routes.redirect(f"/s/{session_id}/" + (f"?{query}" if query else ""))

@@ -223,14 +223,35 @@ def test_the_token_opens_a_session_of_its_own_and_its_page_is_proxied(caplog):
             assert status == 302 and headers["Location"].endswith("/")
             async with client.post(f"{base}{first.path}", data=b"x") as answer:
                 assert answer.status == 405
-            # trame's page asks a session manager first (there is none): answered, not logged
+            # trame's page asks a session manager where to connect (wslink's launcher protocol):
+            # its session's websocket, at the address its page was loaded from (not logged)
             probe = f"{base}{first.path}paraview/"
-            async with client.post(probe, headers=first.headers(base)) as ans:
-                assert ans.status == 405
+            async with client.post(probe, headers=first.headers(base), json={}) as ans:
+                assert ans.status == 200 and ans.headers["Cache-Control"] == "no-store"
+                answer = await ans.json()
+            assert answer == {"id": first.id, "sessionURL": f"ws://USE_HOST{first.path}ws"}
+            # trame's client lowercases the address before it connects: the same session
+            assert answer["sessionURL"].lower() == f"ws://use_host{first.path}ws"
+            for headers in (cookie(base), second.headers(base)):  # not this browser's session
+                async with client.post(probe, headers=headers) as ans:
+                    assert ans.status == 403 and "sessionURL" not in await ans.text()
+            async with client.post(f"{base}/s/nope/paraview/", headers=cookie(base)) as ans:
+                assert ans.status == 404 and "No such session" in await ans.text()
 
     run(body)
     refusals = [r for r in caplog.records if "non-GET" in r.getMessage()]
     assert len(refusals) == 1  # the POST to the page, not the page's own probe
+
+
+def test_session_ids_are_128_bits_of_lowercase_hex():
+    """trame's client lowercases the session address it is given: an id must survive that."""
+    from app.server import routes
+
+    ids = {routes.new_session_id() for _ in range(200)}
+    assert len(ids) == 200
+    for session_id in ids:
+        assert re.fullmatch(r"[0-9a-f]{32}", session_id)
+        assert routes.SESSION_ID.match(f"/s/{session_id}/ws")["id"] == session_id
 
 
 def test_a_session_is_bound_to_the_browser_that_opened_it():

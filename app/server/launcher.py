@@ -39,10 +39,11 @@ port) and proxies everything under ``/s/<session id>/`` to it:
   preloaded parent (app.server.zygote) instead of started afresh: they share its modules, target and
   compiled kernels.
 
-By concern: ``caps`` the limits; ``children`` the session processes (started, or forked by the
-preloaded parent) and stopping them; ``routes`` what a request's path, headers and cookies say;
-``pages`` the launcher's own pages; ``proxy`` a session's pages and websocket passed to its
-process. This module: the door, the sessions and their reaping, and ``serve``.
+By concern: ``caps`` the limits; ``ending`` when a session ends (the reaper's rules);
+``children`` the session processes (started, or forked by the preloaded parent) and stopping
+them; ``routes`` what a request's path, headers and cookies say; ``pages`` the launcher's own
+pages; ``proxy`` a session's pages and websocket passed to its process. This module: the door,
+the sessions and their reaping, and ``serve``.
 """
 
 from __future__ import annotations
@@ -61,7 +62,7 @@ import aiohttp
 from aiohttp import web
 
 from app.logic import upload_folders
-from app.server import connections, headers, index_page, pages, proxy, routes, security
+from app.server import connections, ending, headers, index_page, pages, proxy, routes, security
 from app.server.caps import FORKED_SESSION_BYTES as FORKED_SESSION_BYTES
 from app.server.caps import MAX_DEFAULT_SESSIONS as MAX_DEFAULT_SESSIONS
 from app.server.caps import MEMORY_SHARE as MEMORY_SHARE
@@ -202,7 +203,7 @@ class Launcher:
         address = routes.client_address(request, behind_proxy=bool(self.door.origins))
         problem = self.over_caps(address)
         if problem:
-            return self.refuse(request, problem)
+            return self.refuse(request, problem, address)
         # the tab hears at once that its session is starting (a process may take seconds when a
         # class opens together); its cookies are made now and the way in is sent when it listens
         session_id = routes.new_session_id()
@@ -281,10 +282,17 @@ class Launcher:
                 return f"Your computer has {n_mine} sessions open, the most it may have."
         return None
 
-    def refuse(self, request: web.Request, problem: str) -> web.Response:
+    def refuse(self, request: web.Request, problem: str, address: str = "") -> web.Response:
+        """The 503 page: which cap, and when a session frees (one of this address's if only its
+        own cap is reached)."""
         self.n_refused += 1
         self.log.warning("caps", "refused a new session: %s", problem)
-        return pages.no_session_free(problem, self.caps.idle_s, routes.root_link(request))
+        own_cap_only = bool(address) and self.over_caps("") is None
+        sessions = [c for c in self.sessions.values() if not own_cap_only or c.address == address]
+        frees_in_s = ending.frees_in_s(self.caps, sessions, time.monotonic())
+        return pages.no_session_free(
+            problem, self.caps, routes.root_link(request), frees_in_s=frees_in_s
+        )
 
     async def in_session(self, request: web.Request, found: re.Match, websocket: bool):
         session_id = found["id"]
@@ -387,21 +395,6 @@ class Launcher:
                 await page.close(code=SESSION_ENDED, message=b"session ended")
         await self.stop_child(child)
 
-    def why_end(self, child: Child, now: float) -> str | None:
-        """Why a live session should end now, or None."""
-        caps = self.caps
-        if child.n_sockets == 0:  # a page still loading is given connect_s at least
-            wait_s = caps.idle_s if child.connected else max(caps.idle_s, caps.connect_s)
-            if now - child.idle_since_s >= wait_s:
-                if child.connected:
-                    return f"its page closed for {wait_s:g} s"
-                return f"its page did not connect within {wait_s:g} s"
-        if now - child.last_input_s >= caps.input_idle_s:
-            return f"no input from its page for {caps.input_idle_s:g} s"
-        if now - child.opened_s >= caps.max_age_s:
-            return f"open for {caps.max_age_s:g} s, the most allowed"
-        return None
-
     async def reap(self) -> None:
         """Forget sessions whose process died; end those idle (page closed, or no input even
         with a socket open) or too old; replace a dead spare."""
@@ -417,7 +410,7 @@ class Launcher:
                     with contextlib.suppress(Exception):
                         await page.close(code=SESSION_ENDED, message=b"session ended")
                 continue
-            why = self.why_end(child, now)
+            why = ending.why_end(self.caps, child, now)
             if why is not None:
                 await self.end_session(session_id, why)
         spare = self.spare

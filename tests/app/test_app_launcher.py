@@ -401,6 +401,42 @@ def test_over_the_caps_a_503_page_says_how_many_sessions_are_open():
     run(body)
 
 
+def test_the_503_page_says_when_a_session_frees_if_nobody_uses_it():
+    """The soonest an open session ends by the reaper's rules if its page sends nothing more:
+    its input-idle time left while its websocket is open, its closed-tab time once it is not."""
+
+    async def body():
+        the_caps = caps(max_sessions=1, spare=False, idle_s=150.0, input_idle_s=600.0)
+        async with serving(the_caps) as (launcher, base, client):
+            session = await new_session(client, base)
+            child = launcher.sessions[session.id]
+            pages = []
+            # no websocket yet: the closed-tab time (150 s, over connect_s) is the soonest
+            pages.append((await open_door(client, base))[:2])
+            ws = await client.ws_connect(
+                f"ws://{base[7:]}{session.path}ws",
+                headers={"Origin": base, **session.headers(base)},
+            )
+            pages.append((await open_door(client, base))[:2])  # 600 s of input idle left
+            child.last_input_s -= 330.0  # its page last sent something 5.5 minutes ago
+            pages.append((await open_door(client, base))[:2])
+            child.last_input_s -= 250.0  # 20 s left
+            pages.append((await open_door(client, base))[:2])
+            await ws.close()
+            return pages
+
+    pages = run(body)
+    assert [status for status, _ in pages] == [503] * 4
+    texts = [text for _, text in pages]
+    assert "a session frees within about 3 minutes" in texts[0]
+    assert "a session frees within about 10 minutes" in texts[1]
+    assert "a session frees within about 5 minutes" in texts[2]
+    assert "a session frees within a minute" in texts[3]
+    for text in texts:
+        assert "1 session is open" in text and "If nobody uses it again" in text
+        assert "after 10 minutes without input, or 2.5 minutes after its tab is closed" in text
+
+
 def gated(launcher: lau.Launcher) -> asyncio.Event:
     """Hold the launcher's session processes back from starting until the returned event is
     set (a class opening together on a slow machine, a session that takes seconds)."""
@@ -511,6 +547,24 @@ def test_behind_a_configured_proxy_the_address_cap_counts_the_forwarded_address(
         assert statuses == [200, 503, 200, 503] and addresses == ["10.0.0.5", "10.0.0.6"]
     else:
         assert statuses == [200] * 4 and addresses == ["127.0.0.1"] * 4
+
+
+def test_at_its_own_cap_an_address_is_told_when_one_of_its_own_sessions_frees():
+    """Another computer's session ending makes no room under one computer's own cap."""
+
+    async def body():
+        the_caps = caps(per_address=1, spare=False, max_sessions=5, idle_s=3000.0)
+        async with serving(the_caps, origins=("https://lab.example",)) as (launcher, base, client):
+            for forwarded in ("10.0.0.5", "10.0.0.6"):
+                await open_door(client, base, "", **{"X-Forwarded-For": forwarded})
+                await until(lambda: launcher.n_starting == 0, "the door to finish")
+            other = next(c for c in launcher.sessions.values() if c.address == "10.0.0.6")
+            other.last_input_s -= the_caps.input_idle_s - 20.0  # ends within a minute
+            return await open_door(client, base, "", **{"X-Forwarded-For": "10.0.0.5"})
+
+    status, text, _ = run(body)
+    assert status == 503 and "Your computer has 1 session" in text
+    assert "a session frees within about 30 minutes" in text
 
 
 def test_a_browser_holds_at_most_its_share_of_sessions():

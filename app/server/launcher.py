@@ -175,7 +175,7 @@ class Launcher:
         token_cookie = self.door.cookie_name(request) if from_address else None
         response = await self.new_session(request, token_cookie)
         if token_cookie and not response.prepared:
-            response.set_cookie(token_cookie, self.token, httponly=True, samesite="Strict")
+            response.set_cookie(token_cookie, self.token, **self.door.cookie_attributes(request))
         return response
 
     async def new_session(
@@ -214,16 +214,14 @@ class Launcher:
         page.set_cookie(
             session_cookie(session_id),
             secret,
-            path=f"/s/{session_id}/",
-            httponly=True,
-            samesite="Strict",
             max_age=int(self.caps.max_age_s) + 60,
+            **self.door.cookie_attributes(request, path=f"/s/{session_id}/"),
         )
         page.set_cookie(
-            routes.client_cookie(request), client, httponly=True, samesite="Strict", path="/"
+            routes.client_cookie(request), client, **self.door.cookie_attributes(request)
         )
         if token_cookie:
-            page.set_cookie(token_cookie, self.token, httponly=True, samesite="Strict")
+            page.set_cookie(token_cookie, self.token, **self.door.cookie_attributes(request))
         nonce = headers.new_nonce(request)  # the page's one script, in the headers sent now
         self.n_starting += 1
         try:

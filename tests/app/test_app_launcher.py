@@ -344,6 +344,36 @@ def test_the_token_cookie_alone_starts_a_session_only_from_the_apps_own_pages(
         assert "Open the address that lmapd app printed" in text and "href='/?pixels=32'" in text
 
 
+@pytest.mark.parametrize("behind_tls", [False, True], ids=["http", "https-proxy"])
+def test_the_doors_cookies_are_httponly_strict_scoped_and_secure_behind_https(behind_tls):
+    """The token's and the browser's cookies at ``/`` (the door's own address), the session's at
+    ``/s/<id>/`` only; all HttpOnly and SameSite=Strict, and Secure where the page is served
+    over https (here: through a proxy at a configured https address, which passes the Host)."""
+    options = {"origins": ("https://lab.example",)} if behind_tls else {}
+    host = {"Host": "lab.example", "X-Forwarded-For": "10.0.0.5"} if behind_tls else {}
+
+    async def body():
+        async with serving(caps(spare=False), **options) as (launcher, base, client):
+            url = f"{base}/?token={TOKEN}"
+            headers = {**NAVIGATION, **host}
+            async with client.get(url, allow_redirects=False, headers=headers) as answer:
+                await answer.text()
+                return answer.headers.getall("Set-Cookie")
+
+    set_cookies = run(body)
+    by_name = {line.split("=", 1)[0]: line for line in set_cookies}
+    assert len(by_name) == 3, set_cookies
+    for name, line in by_name.items():
+        attributes = {part.strip().split("=")[0].lower() for part in line.split(";")[1:]}
+        assert {"httponly", "samesite", "path"} <= attributes, line
+        assert "SameSite=Strict" in line
+        assert ("secure" in attributes) is behind_tls, line
+        session = name.startswith("lmapd-session-")
+        want = f"Path=/s/{name.removeprefix('lmapd-session-')}/" if session else "Path=/;"
+        assert want in line + ";", line
+    assert sum(n.startswith(("lmapd-token-", "lmapd-client-")) for n in by_name) == 2
+
+
 def test_every_answer_carries_the_security_headers_and_the_doors_script_its_nonce():
     async def body():
         async with serving(caps(spare=False)) as (_, base, client):

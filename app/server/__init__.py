@@ -4,10 +4,11 @@ the connection guards, and the patches of trame-server and wslink with the relea
 checked against.
 
 ``launcher`` the sessions and the proxy in front of them, by concern in ``caps`` (the limits),
-``children`` (the session processes, started or forked), ``routes`` (what a request's path and
-cookies say), ``pages`` (the launcher's own pages) and ``proxy`` (a session's pages and websocket
-passed to its process); ``zygote`` the sessions' preloaded parent; ``process`` the serving
-processes (a session's token and address-space limit, the launcher's run, the exit status);
+``ending`` (when a session ends), ``children`` (the session processes, started or forked),
+``routes`` (what a request's path and cookies say), ``pages`` (the launcher's own pages) and
+``proxy`` (a session's pages and websocket passed to its process); ``zygote`` the sessions'
+preloaded parent; ``process`` the serving processes (a session's token and address-space limit,
+the launcher's run, the exit status);
 ``addresses`` what the server prints and trame's options;
 ``security`` the websocket door (``install``), by concern in ``door`` (the token, origins and
 connection cap), ``guard`` (the wslink hello and the calls a page may make), ``budget`` (the

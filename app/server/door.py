@@ -44,6 +44,28 @@ class Door:
     def cookie_name(self, request: web.Request) -> str:
         return f"lmapd-token-{_local_port(request)}"
 
+    def served_securely(self, request: web.Request) -> bool:
+        """Whether the browser reached this server over https: directly, or through a reverse
+        proxy at one of its configured ``https://`` addresses (the request's ``Host`` names it:
+        the documented proxy passes the browser's own)."""
+        if request.secure:
+            return True
+        host = request.headers.get("Host", "")
+        return bool(host) and normal_origin(f"https://{host}") in self.origins
+
+    def cookie_attributes(self, request: web.Request, path: str = "/") -> dict:
+        """The attributes of a cookie set in the answer to ``request``: HttpOnly (no script
+        reads it), SameSite=Strict (no other site's page sends it), ``path`` (the token's: ``/``,
+        the door's own address, which every other path of the server is under) and, where the
+        page is served over https, Secure (never sent over plain http, such as a first
+        ``http://`` visit before the proxy's redirect)."""
+        return {
+            "httponly": True,
+            "samesite": "Strict",
+            "path": path,
+            "secure": self.served_securely(request),
+        }
+
     def token_ok(self, request: web.Request) -> tuple[bool, bool]:
         """(authorised, from the address): the token is in the query or in our cookie."""
         query = request.query.get("token", "")
@@ -91,7 +113,7 @@ class Door:
         response = await handler(request)
         if from_address:
             response.set_cookie(
-                self.cookie_name(request), self.token, httponly=True, samesite="Strict", path="/"
+                self.cookie_name(request), self.token, **self.cookie_attributes(request)
             )
         return response
 

@@ -4,7 +4,13 @@ waits for its state. Without the hints trame's client learns their names from th
 the style sheets and only then the scripts: two more round trips after the state before the page
 can mount (from the state to the mount done, 0.92 s before the hints and 0.69 s with them on this
 project's 2-core machine: docs/serving.md). The hints change no behaviour: the client still loads
-each file itself, from the browser's cache."""
+each file itself, from the browser's cache.
+
+The page's other first request is trame's question to a session manager (wslink's launcher
+protocol): at every load, before it connects, trame's client POSTs to the ``paraview/`` beside the
+page and connects to the ``sessionURL`` of a JSON answer (after a refusal it falls back to the
+``ws`` beside the page, and the browser's console shows the refusal).
+:func:`session_manager_answer` is that answer, here and behind the launcher (``/s/<id>/``)."""
 
 from __future__ import annotations
 
@@ -14,8 +20,11 @@ from pathlib import Path
 from aiohttp import web
 from trame_client.module import vue3
 
+from app.server.door import WS_PATH
+
 INDEX_HTML = Path(vue3.www) / "index.html"
 PAGE_PATHS = ("/", "/index.html")
+SESSION_MANAGER_PATH = "/paraview/"  # where trame's page asks where to connect (POST)
 
 
 def file_names(entries) -> list[str]:
@@ -43,10 +52,28 @@ def page_html(state, index_html: Path = INDEX_HTML) -> str:
     return text[:head_end] + links.lstrip() + "  " + text[head_end:]
 
 
+def session_manager_answer(prefix: str = "", session_id: str | None = None) -> dict[str, str]:
+    """What trame's page is told when it asks where to connect (wslink's launcher protocol: the
+    session's ``id`` where there is one, and its ``sessionURL``): the websocket at ``prefix`` +
+    ``/ws`` of the address the page was loaded from. ``USE_HOST`` is trame's client's own word for
+    that address (``window.location.host``), and it sets ``ws:`` or ``wss:`` by the page's own
+    scheme, so the answer holds behind a TLS proxy too. The client lowercases the whole address
+    before it connects: ``prefix`` must be lowercase (a session id is lowercase hex)."""
+    if prefix != prefix.lower():
+        raise ValueError(f"a websocket path trame's client would lowercase: {prefix!r}")
+    answer = {"sessionURL": f"ws://USE_HOST{prefix}{WS_PATH}"}
+    return answer if session_id is None else {"id": session_id, **answer}
+
+
+def session_manager_response(answer: dict[str, str]) -> web.Response:
+    return web.json_response(answer, headers={"Cache-Control": "no-store"})
+
+
 def middleware_for(state):
     """An aiohttp middleware that answers the page (``/`` and ``/index.html``) with
     :func:`page_html`, made once, at the first request (the page's modules are all enabled by
-    then). Installed after the door: the page needs the access token like every other file."""
+    then), and trame's question to a session manager with :func:`session_manager_answer`.
+    Installed after the door: the page needs the access token like every other file."""
     made: list[str] = []
 
     @web.middleware
@@ -55,6 +82,8 @@ def middleware_for(state):
             if not made:
                 made.append(page_html(state))
             return web.Response(text=made[0], content_type="text/html")
+        if request.method == "POST" and request.path == SESSION_MANAGER_PATH:
+            return session_manager_response(session_manager_answer())
         return await handler(request)
 
     return middleware

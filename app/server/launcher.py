@@ -16,11 +16,15 @@ port) and proxies everything under ``/s/<session id>/`` to it:
   even when the link was opened from another site); the page keeps the token for its share
   links and then shows only ``/`` in the address bar (app/static/link.js), so a reload
   or a shared link always opens a new session;
-* under ``/s/<id>/`` only GET and HEAD, and the websocket at ``/s/<id>/ws`` (trame's page builds
-  it from its own path), are passed to that session's process, with the process's own private
-  token (given on its stdin, never on a command line) and origin; the websocket's ``Origin`` and
-  the session's cookie are checked first, and frames are limited to wslink's chunk size (the
-  process reassembles messages within ``app.server.security``'s limits and screens every call);
+* a session's id is 128 random bits in lowercase hex (trame's client lowercases the address it
+  is told to connect to); trame's page asks where to connect at every load (a POST to
+  ``/s/<id>/paraview/``, wslink's launcher protocol) and is told its session's websocket,
+  ``/s/<id>/ws`` of the address it was loaded from (``index_page.session_manager_answer``);
+* under ``/s/<id>/`` only GET and HEAD, and the websocket at ``/s/<id>/ws``, are passed to that
+  session's process, with the process's own private token (given on its stdin, never on a
+  command line) and origin; the websocket's ``Origin`` and the session's cookie are checked
+  first, and frames are limited to wslink's chunk size (the process reassembles messages within
+  ``app.server.security``'s limits and screens every call);
 * an unknown or ended session gets a page saying so, with a link that starts a new one; over the
   caps (``Caps``: sessions, the processes' total memory, sessions per browser and per address) a
   503 page says how many are open;
@@ -35,10 +39,11 @@ port) and proxies everything under ``/s/<session id>/`` to it:
   preloaded parent (app.server.zygote) instead of started afresh: they share its modules, target and
   compiled kernels.
 
-By concern: ``caps`` the limits; ``children`` the session processes (started, or forked by the
-preloaded parent) and stopping them; ``routes`` what a request's path, headers and cookies say;
-``pages`` the launcher's own pages; ``proxy`` a session's pages and websocket passed to its
-process. This module: the door, the sessions and their reaping, and ``serve``.
+By concern: ``caps`` the limits; ``ending`` when a session ends (the reaper's rules);
+``children`` the session processes (started, or forked by the preloaded parent) and stopping
+them; ``routes`` what a request's path, headers and cookies say; ``pages`` the launcher's own
+pages; ``proxy`` a session's pages and websocket passed to its process. This module: the door,
+the sessions and their reaping, and ``serve``.
 """
 
 from __future__ import annotations
@@ -57,7 +62,7 @@ import aiohttp
 from aiohttp import web
 
 from app.logic import upload_folders
-from app.server import connections, headers, pages, proxy, routes, security
+from app.server import connections, ending, headers, index_page, pages, proxy, routes, security
 from app.server.caps import FORKED_SESSION_BYTES as FORKED_SESSION_BYTES
 from app.server.caps import MAX_DEFAULT_SESSIONS as MAX_DEFAULT_SESSIONS
 from app.server.caps import MEMORY_SHARE as MEMORY_SHARE
@@ -148,13 +153,9 @@ class Launcher:
         websocket = request.headers.get("Upgrade", "").lower() == "websocket"
         path = request.path
         found = routes.SESSION_ID.match(path)
-        if request.method not in ("GET", "HEAD"):
-            # trame's page first asks a session manager where to connect (a POST to the
-            # paraview/ beside it, every load); there is none: answered, but not a refusal to log
-            if not (found and found["rest"] == "/paraview/" and request.method == "POST"):
-                self.log.warning(
-                    "method", "refused a %s request from %s", "non-GET", request.remote
-                )
+        probe = bool(found) and routes.is_session_manager_probe(request.method, found["rest"])
+        if request.method not in ("GET", "HEAD") and not probe:
+            self.log.warning("method", "refused a %s request from %s", "non-GET", request.remote)
             return web.Response(status=405, text="Method not allowed\n")
         if found:  # a session's own cookie lets in, not the token
             return await self.in_session(request, found, websocket)
@@ -174,7 +175,7 @@ class Launcher:
         token_cookie = self.door.cookie_name(request) if from_address else None
         response = await self.new_session(request, token_cookie)
         if token_cookie and not response.prepared:
-            response.set_cookie(token_cookie, self.token, httponly=True, samesite="Strict")
+            response.set_cookie(token_cookie, self.token, **self.door.cookie_attributes(request))
         return response
 
     async def new_session(
@@ -202,10 +203,10 @@ class Launcher:
         address = routes.client_address(request, behind_proxy=bool(self.door.origins))
         problem = self.over_caps(address)
         if problem:
-            return self.refuse(request, problem)
+            return self.refuse(request, problem, address)
         # the tab hears at once that its session is starting (a process may take seconds when a
         # class opens together); its cookies are made now and the way in is sent when it listens
-        session_id = secrets.token_urlsafe(16)
+        session_id = routes.new_session_id()
         secret = secrets.token_urlsafe(32)
         page = web.StreamResponse(status=200, headers=NO_STORE)
         page.content_type = "text/html"
@@ -213,16 +214,14 @@ class Launcher:
         page.set_cookie(
             session_cookie(session_id),
             secret,
-            path=f"/s/{session_id}/",
-            httponly=True,
-            samesite="Strict",
             max_age=int(self.caps.max_age_s) + 60,
+            **self.door.cookie_attributes(request, path=f"/s/{session_id}/"),
         )
         page.set_cookie(
-            routes.client_cookie(request), client, httponly=True, samesite="Strict", path="/"
+            routes.client_cookie(request), client, **self.door.cookie_attributes(request)
         )
         if token_cookie:
-            page.set_cookie(token_cookie, self.token, httponly=True, samesite="Strict")
+            page.set_cookie(token_cookie, self.token, **self.door.cookie_attributes(request))
         nonce = headers.new_nonce(request)  # the page's one script, in the headers sent now
         self.n_starting += 1
         try:
@@ -281,10 +280,17 @@ class Launcher:
                 return f"Your computer has {n_mine} sessions open, the most it may have."
         return None
 
-    def refuse(self, request: web.Request, problem: str) -> web.Response:
+    def refuse(self, request: web.Request, problem: str, address: str = "") -> web.Response:
+        """The 503 page: which cap, and when a session frees (one of this address's if only its
+        own cap is reached)."""
         self.n_refused += 1
         self.log.warning("caps", "refused a new session: %s", problem)
-        return pages.no_session_free(problem, self.caps.idle_s, routes.root_link(request))
+        own_cap_only = bool(address) and self.over_caps("") is None
+        sessions = [c for c in self.sessions.values() if not own_cap_only or c.address == address]
+        frees_in_s = ending.frees_in_s(self.caps, sessions, time.monotonic())
+        return pages.no_session_free(
+            problem, self.caps, routes.root_link(request), frees_in_s=frees_in_s
+        )
 
     async def in_session(self, request: web.Request, found: re.Match, websocket: bool):
         session_id = found["id"]
@@ -299,6 +305,9 @@ class Launcher:
             self.log.warning("foreign", "refused a request for another browser's session")
             return pages.foreign_session()
         rest = found["rest"]
+        if routes.is_session_manager_probe(request.method, rest):
+            # trame's page asks where to connect, at every load (wslink's launcher protocol)
+            return index_page.session_manager_response(routes.session_manager_answer(session_id))
         if rest is None:  # /s/<id> -> /s/<id>/ (the page's relative addresses need the slash)
             query = request.query_string
             return routes.redirect(f"/s/{session_id}/" + (f"?{query}" if query else ""))
@@ -384,21 +393,6 @@ class Launcher:
                 await page.close(code=SESSION_ENDED, message=b"session ended")
         await self.stop_child(child)
 
-    def why_end(self, child: Child, now: float) -> str | None:
-        """Why a live session should end now, or None."""
-        caps = self.caps
-        if child.n_sockets == 0:  # a page still loading is given connect_s at least
-            wait_s = caps.idle_s if child.connected else max(caps.idle_s, caps.connect_s)
-            if now - child.idle_since_s >= wait_s:
-                if child.connected:
-                    return f"its page closed for {wait_s:g} s"
-                return f"its page did not connect within {wait_s:g} s"
-        if now - child.last_input_s >= caps.input_idle_s:
-            return f"no input from its page for {caps.input_idle_s:g} s"
-        if now - child.opened_s >= caps.max_age_s:
-            return f"open for {caps.max_age_s:g} s, the most allowed"
-        return None
-
     async def reap(self) -> None:
         """Forget sessions whose process died; end those idle (page closed, or no input even
         with a socket open) or too old; replace a dead spare."""
@@ -414,7 +408,7 @@ class Launcher:
                     with contextlib.suppress(Exception):
                         await page.close(code=SESSION_ENDED, message=b"session ended")
                 continue
-            why = self.why_end(child, now)
+            why = ending.why_end(self.caps, child, now)
             if why is not None:
                 await self.end_session(session_id, why)
         spare = self.spare

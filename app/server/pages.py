@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import html
 import json
+import math
 
 from aiohttp import web
 
@@ -54,19 +55,45 @@ def not_from_here(link: str) -> web.Response:
     )
 
 
-def no_session_free(problem: str, idle_s: float, link: str) -> web.Response:
+def no_session_free(problem: str, caps, link: str, frees_in_s: float | None = None) -> web.Response:
     """The door's answer when the caps leave no room for a session (a 503): ``problem`` says
-    which cap, ``idle_s`` when a closed tab's session ends [s]."""
-    idle = f"{idle_s:g}"
+    which cap; ``caps`` (app.server.caps.Caps) when a session ends (``idle_s`` after its tab
+    closed, ``input_idle_s`` after its page's last input); ``frees_in_s`` how long until the
+    first open session that would make room ends if nobody uses it again [s], None if unknown."""
+    if frees_in_s is None:
+        when = (
+            "Close a tab of this app that you no longer use (its session ends "
+            f"{_duration(caps.idle_s)} after), then try again"
+        )
+    else:
+        when = (
+            f"If nobody uses it again, a session frees {_within(frees_in_s)} (a session ends "
+            f"after {_duration(caps.input_idle_s)} without input, or {_duration(caps.idle_s)} "
+            "after its tab is closed). Close a tab of this app that you no longer use, then try "
+            "again"
+        )
     return message_page(
         503,
         "No session free",
-        f"{problem} Close a tab of this app that you no longer use (its session ends {idle} s "
-        "after), then try again; or ask whoever runs the server to start it with a higher "
+        f"{problem} {when}; or ask whoever runs the server to start it with a higher "
         "--max-sessions.",
         link,
         "Try again",
     )
+
+
+def _within(seconds: float) -> str:
+    """``seconds`` from now as a student reads it: "within a minute", "within about 4 minutes"."""
+    minutes = math.ceil(seconds / 60.0)
+    return "within a minute" if minutes <= 1 else f"within about {minutes} minutes"
+
+
+def _duration(seconds: float) -> str:
+    """A cap's duration: "60 s", "30 minutes", "1 minute"."""
+    if seconds < 120:
+        return f"{seconds:g} s"
+    minutes = seconds / 60.0
+    return f"{minutes:.3g} minutes"
 
 
 def no_such_session(link: str) -> web.Response:

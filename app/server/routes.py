@@ -1,5 +1,7 @@
 """What the launcher reads off a request, and the addresses and cookie names it makes: which
-session a path names (``SESSION_ID``) and whether the rest of it stays inside (``safe_rest``),
+session a path names (``SESSION_ID``; the ids it makes, ``new_session_id``) and whether the rest
+of it stays inside (``safe_rest``), whether it is trame's question to a session manager
+(``is_session_manager_probe``),
 whether a request to the door is a tab's navigation (``navigation_problem``), the names of a
 session's and a browser's cookies, and the launcher's root with a request's settings."""
 
@@ -7,14 +9,37 @@ from __future__ import annotations
 
 import ipaddress
 import re
+import secrets
 from urllib.parse import quote
 
 from aiohttp import web
 
-from app.server import security
+from app.server import index_page, security
 
 CLIENT_ID = re.compile(r"^[A-Za-z0-9_-]{16,64}$")
+# any id-like segment is read as a session's (an unknown one gets the "No such session" page);
+# the ids the launcher makes are lowercase hex (new_session_id)
 SESSION_ID = re.compile(r"^/s/(?P<id>[A-Za-z0-9_-]{1,64})(?P<rest>/.*)?$")
+SESSION_ID_BYTES = 16  # 128 bits of entropy
+
+
+def new_session_id() -> str:
+    """A new session's id: ``SESSION_ID_BYTES`` random bytes as lowercase hex. Lowercase because
+    trame's client lowercases the whole ``sessionURL`` it is given (``/s/<id>/ws``) before it
+    connects: a mixed-case id would send the websocket to a session that does not exist."""
+    return secrets.token_hex(SESSION_ID_BYTES)
+
+
+def is_session_manager_probe(method: str, rest: str | None) -> bool:
+    """Whether a request inside a session (``rest``, the path after ``/s/<id>``) is trame's
+    question to a session manager: a POST to the ``paraview/`` beside its page."""
+    return method == "POST" and rest == index_page.SESSION_MANAGER_PATH
+
+
+def session_manager_answer(session_id: str) -> dict[str, str]:
+    """The answer to a session page's question (wslink's launcher protocol): the session's id
+    and its websocket, ``/s/<id>/ws`` of the address the page was loaded from."""
+    return index_page.session_manager_answer(f"/s/{session_id}", session_id)
 
 
 def navigation_problem(headers) -> str | None:

@@ -25,7 +25,7 @@ from support.hostile_meshes import bufferless_glb, ply_claiming, shared_accessor
 from support.launch import app_process
 from support.soak import rss_mb
 
-from app.server.security import MAX_MESSAGE_BYTES, Limits
+from app.server.security import MAX_MESSAGE_BYTES, Door, Limits
 
 pytestmark = pytest.mark.slow
 
@@ -107,6 +107,8 @@ def test_the_page_needs_the_token_and_the_address_sets_its_cookie(app):
     status, headers = http_get(base + f"?token={app.token}")
     cookie = headers.get("Set-Cookie", "")
     assert status == 200 and "HttpOnly" in cookie and "SameSite=Strict" in cookie
+    # every path of the server needs it (the page, its files, its websocket); plain http here
+    assert "Path=/;" in cookie + ";" and "secure" not in cookie.lower()
     name_value = cookie.split(";")[0]
     assert http_get(base, {"Cookie": name_value})[0] == 200
 
@@ -497,3 +499,23 @@ def test_hostile_uploads_are_refused_in_a_launchers_session_which_stays_alive(tm
 
 def _started(process: psutil.Process) -> float:
     return process.create_time()
+
+
+def test_the_doors_cookies_are_secure_only_where_the_page_is_served_over_https():
+    from aiohttp.test_utils import make_mocked_request
+
+    def attributes(door, host: str) -> dict:
+        return door.cookie_attributes(make_mocked_request("GET", "/", headers={"Host": host}))
+
+    proxied = Door("t", "127.0.0.1", Limits(), ("https://lab.example",))
+    assert attributes(proxied, "lab.example") == {
+        "httponly": True,
+        "samesite": "Strict",
+        "path": "/",
+        "secure": True,
+    }
+    assert attributes(proxied, "lab.example:443")["secure"]
+    assert not attributes(proxied, "127.0.0.1:8080")["secure"]  # the server's own address
+    assert not attributes(Door("t", "127.0.0.1", Limits()), "lab.example")[
+        "secure"
+    ]  # no proxy configured: a Host header alone proves nothing

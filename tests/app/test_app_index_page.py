@@ -1,12 +1,16 @@
-"""The page's first answer (app.server.index_page): trame's index.html with a preload link for
+"""The page's first answers (app.server.index_page): trame's index.html with a preload link for
 each style sheet and script the page's state names, so the browser fetches them while the page
-connects; nothing else of trame's page changes."""
+connects (nothing else of trame's page changes); and its question to a session manager, told the
+websocket beside the page."""
 
 from __future__ import annotations
 
+import json
 import re
+import urllib.error
 import urllib.request
 
+import pytest
 from test_app_hostile import app, http_get  # noqa: F401  (the module's app server)
 
 from app.server import index_page
@@ -63,3 +67,29 @@ def test_the_served_page_preloads_the_widget_libraries_and_its_own_files_each_of
     assert "vue.global.js" in page and "index-" in page  # trame's own page around them
     for name in names:
         assert http_get(f"{app.origin}/{name}", {"Cookie": cookie})[0] == 200, name
+
+
+def post(url: str, headers: dict | None = None) -> tuple[int, dict, bytes]:
+    request = urllib.request.Request(url, data=b"{}", headers=headers or {}, method="POST")
+    try:
+        with urllib.request.urlopen(request, timeout=30) as response:
+            return response.status, dict(response.headers), response.read()
+    except urllib.error.HTTPError as exc:
+        return exc.code, dict(exc.headers), exc.read()
+
+
+def test_trames_question_to_a_session_manager_is_told_the_pages_own_websocket(app):  # noqa: F811
+    """trame's page POSTs to ``paraview/`` at every load (wslink's launcher protocol) and
+    connects where the answer says: here, the ``/ws`` beside the page; with the token only."""
+    cookie = http_get(app.url)[1]["Set-Cookie"].split(";")[0]
+    status, headers, body = post(f"{app.origin}/paraview/", {"Cookie": cookie})
+    assert (status, headers["Content-Type"].split(";")[0]) == (200, "application/json")
+    assert json.loads(body) == {"sessionURL": "ws://USE_HOST/ws"}
+    assert post(f"{app.origin}/paraview/")[0] == 403  # no token: nothing is said
+    assert post(f"{app.origin}/other/", {"Cookie": cookie})[0] != 200
+
+
+def test_the_answer_is_refused_a_path_the_client_would_change_by_lowercasing_it():
+    assert index_page.session_manager_answer("/s/ab12") == {"sessionURL": "ws://USE_HOST/s/ab12/ws"}
+    with pytest.raises(ValueError, match="lowercase"):
+        index_page.session_manager_answer("/s/aB12")

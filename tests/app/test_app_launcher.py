@@ -223,14 +223,35 @@ def test_the_token_opens_a_session_of_its_own_and_its_page_is_proxied(caplog):
             assert status == 302 and headers["Location"].endswith("/")
             async with client.post(f"{base}{first.path}", data=b"x") as answer:
                 assert answer.status == 405
-            # trame's page asks a session manager first (there is none): answered, not logged
+            # trame's page asks a session manager where to connect (wslink's launcher protocol):
+            # its session's websocket, at the address its page was loaded from (not logged)
             probe = f"{base}{first.path}paraview/"
-            async with client.post(probe, headers=first.headers(base)) as ans:
-                assert ans.status == 405
+            async with client.post(probe, headers=first.headers(base), json={}) as ans:
+                assert ans.status == 200 and ans.headers["Cache-Control"] == "no-store"
+                answer = await ans.json()
+            assert answer == {"id": first.id, "sessionURL": f"ws://USE_HOST{first.path}ws"}
+            # trame's client lowercases the address before it connects: the same session
+            assert answer["sessionURL"].lower() == f"ws://use_host{first.path}ws"
+            for headers in (cookie(base), second.headers(base)):  # not this browser's session
+                async with client.post(probe, headers=headers) as ans:
+                    assert ans.status == 403 and "sessionURL" not in await ans.text()
+            async with client.post(f"{base}/s/nope/paraview/", headers=cookie(base)) as ans:
+                assert ans.status == 404 and "No such session" in await ans.text()
 
     run(body)
     refusals = [r for r in caplog.records if "non-GET" in r.getMessage()]
     assert len(refusals) == 1  # the POST to the page, not the page's own probe
+
+
+def test_session_ids_are_128_bits_of_lowercase_hex():
+    """trame's client lowercases the session address it is given: an id must survive that."""
+    from app.server import routes
+
+    ids = {routes.new_session_id() for _ in range(200)}
+    assert len(ids) == 200
+    for session_id in ids:
+        assert re.fullmatch(r"[0-9a-f]{32}", session_id)
+        assert routes.SESSION_ID.match(f"/s/{session_id}/ws")["id"] == session_id
 
 
 def test_a_session_is_bound_to_the_browser_that_opened_it():
@@ -323,6 +344,36 @@ def test_the_token_cookie_alone_starts_a_session_only_from_the_apps_own_pages(
         assert "Open the address that lmapd app printed" in text and "href='/?pixels=32'" in text
 
 
+@pytest.mark.parametrize("behind_tls", [False, True], ids=["http", "https-proxy"])
+def test_the_doors_cookies_are_httponly_strict_scoped_and_secure_behind_https(behind_tls):
+    """The token's and the browser's cookies at ``/`` (the door's own address), the session's at
+    ``/s/<id>/`` only; all HttpOnly and SameSite=Strict, and Secure where the page is served
+    over https (here: through a proxy at a configured https address, which passes the Host)."""
+    options = {"origins": ("https://lab.example",)} if behind_tls else {}
+    host = {"Host": "lab.example", "X-Forwarded-For": "10.0.0.5"} if behind_tls else {}
+
+    async def body():
+        async with serving(caps(spare=False), **options) as (launcher, base, client):
+            url = f"{base}/?token={TOKEN}"
+            headers = {**NAVIGATION, **host}
+            async with client.get(url, allow_redirects=False, headers=headers) as answer:
+                await answer.text()
+                return answer.headers.getall("Set-Cookie")
+
+    set_cookies = run(body)
+    by_name = {line.split("=", 1)[0]: line for line in set_cookies}
+    assert len(by_name) == 3, set_cookies
+    for name, line in by_name.items():
+        attributes = {part.strip().split("=")[0].lower() for part in line.split(";")[1:]}
+        assert {"httponly", "samesite", "path"} <= attributes, line
+        assert "SameSite=Strict" in line
+        assert ("secure" in attributes) is behind_tls, line
+        session = name.startswith("lmapd-session-")
+        want = f"Path=/s/{name.removeprefix('lmapd-session-')}/" if session else "Path=/;"
+        assert want in line + ";", line
+    assert sum(n.startswith(("lmapd-token-", "lmapd-client-")) for n in by_name) == 2
+
+
 def test_every_answer_carries_the_security_headers_and_the_doors_script_its_nonce():
     async def body():
         async with serving(caps(spare=False)) as (_, base, client):
@@ -378,6 +429,42 @@ def test_over_the_caps_a_503_page_says_how_many_sessions_are_open():
             assert status == 503 and "1 session is open and use" in text and "MB" in text
 
     run(body)
+
+
+def test_the_503_page_says_when_a_session_frees_if_nobody_uses_it():
+    """The soonest an open session ends by the reaper's rules if its page sends nothing more:
+    its input-idle time left while its websocket is open, its closed-tab time once it is not."""
+
+    async def body():
+        the_caps = caps(max_sessions=1, spare=False, idle_s=150.0, input_idle_s=600.0)
+        async with serving(the_caps) as (launcher, base, client):
+            session = await new_session(client, base)
+            child = launcher.sessions[session.id]
+            pages = []
+            # no websocket yet: the closed-tab time (150 s, over connect_s) is the soonest
+            pages.append((await open_door(client, base))[:2])
+            ws = await client.ws_connect(
+                f"ws://{base[7:]}{session.path}ws",
+                headers={"Origin": base, **session.headers(base)},
+            )
+            pages.append((await open_door(client, base))[:2])  # 600 s of input idle left
+            child.last_input_s -= 330.0  # its page last sent something 5.5 minutes ago
+            pages.append((await open_door(client, base))[:2])
+            child.last_input_s -= 250.0  # 20 s left
+            pages.append((await open_door(client, base))[:2])
+            await ws.close()
+            return pages
+
+    pages = run(body)
+    assert [status for status, _ in pages] == [503] * 4
+    texts = [text for _, text in pages]
+    assert "a session frees within about 3 minutes" in texts[0]
+    assert "a session frees within about 10 minutes" in texts[1]
+    assert "a session frees within about 5 minutes" in texts[2]
+    assert "a session frees within a minute" in texts[3]
+    for text in texts:
+        assert "1 session is open" in text and "If nobody uses it again" in text
+        assert "after 10 minutes without input, or 2.5 minutes after its tab is closed" in text
 
 
 def gated(launcher: lau.Launcher) -> asyncio.Event:
@@ -490,6 +577,24 @@ def test_behind_a_configured_proxy_the_address_cap_counts_the_forwarded_address(
         assert statuses == [200, 503, 200, 503] and addresses == ["10.0.0.5", "10.0.0.6"]
     else:
         assert statuses == [200] * 4 and addresses == ["127.0.0.1"] * 4
+
+
+def test_at_its_own_cap_an_address_is_told_when_one_of_its_own_sessions_frees():
+    """Another computer's session ending makes no room under one computer's own cap."""
+
+    async def body():
+        the_caps = caps(per_address=1, spare=False, max_sessions=5, idle_s=3000.0)
+        async with serving(the_caps, origins=("https://lab.example",)) as (launcher, base, client):
+            for forwarded in ("10.0.0.5", "10.0.0.6"):
+                await open_door(client, base, "", **{"X-Forwarded-For": forwarded})
+                await until(lambda: launcher.n_starting == 0, "the door to finish")
+            other = next(c for c in launcher.sessions.values() if c.address == "10.0.0.6")
+            other.last_input_s -= the_caps.input_idle_s - 20.0  # ends within a minute
+            return await open_door(client, base, "", **{"X-Forwarded-For": "10.0.0.5"})
+
+    status, text, _ = run(body)
+    assert status == 503 and "Your computer has 1 session" in text
+    assert "a session frees within about 30 minutes" in text
 
 
 def test_a_browser_holds_at_most_its_share_of_sessions():

@@ -1,10 +1,12 @@
 """Each tab its own scene (``lmapd app`` without ``--shared``: app.server.launcher) in a real
 Chromium: two tabs keep their own scenes and a reload opens a new one, the address bar shows neither
 the token nor the session, a link made in one tab opens a new session with the same scene, a bad
-session id gets the message page, and over the cap the 503 page says how many are open."""
+session id gets the message page, and over the cap the 503 page says how many are open and when
+one frees."""
 
 from __future__ import annotations
 
+import re
 import urllib.parse
 
 import pytest
@@ -134,6 +136,11 @@ def test_over_the_cap_a_503_page_says_how_many_are_open(page, artifacts_dir):
             assert answer.status == 503
             message = second.locator(".launcher-message").inner_text()
             assert "1 session is open" in message and "--max-sessions" in message
+            # the open tab's session ends 30 minutes (the default) after its last input
+            frees = re.search(
+                r"If nobody uses it again, a session frees within about (\d+) min", message
+            )
+            assert frees and 20 <= int(frees[1]) <= 30, message
             page.close()  # its session ends 1 s after its websocket closed: room for the next
             for _ in range(60):  # bounded; each try is a page load
                 answer = second.goto(url + SMALL, wait_until=DOOR)

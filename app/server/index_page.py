@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import html
 from pathlib import Path
+from urllib.parse import urlencode
 
 from aiohttp import web
 from trame_client.module import vue3
@@ -25,6 +26,14 @@ from app.server.door import WS_PATH
 INDEX_HTML = Path(vue3.www) / "index.html"
 PAGE_PATHS = ("/", "/index.html")
 SESSION_MANAGER_PATH = "/paraview/"  # where trame's page asks where to connect (POST)
+
+
+# trame's page reads its connection settings from its own address's query too (trame-client's
+# config takes every query key): a link that names one could point a student's page elsewhere or
+# break it (the CSP's connect-src already refuses another host), so no page is served with them
+FRAMEWORK_KEYS = frozenset(
+    ("sessionurl", "sessionmanagerurl", "secret", "wsproxy", "retry", "application", "usehost")
+)
 
 
 def file_names(entries) -> list[str]:
@@ -79,6 +88,12 @@ def middleware_for(state):
     @web.middleware
     async def middleware(request: web.Request, handler):
         if request.method == "GET" and request.path in PAGE_PATHS:
+            if any(k.lower() in FRAMEWORK_KEYS for k in request.query):  # read by the page
+                kept = [(k, v) for k, v in request.query.items() if k.lower() not in FRAMEWORK_KEYS]
+                location = request.path + ("?" + urlencode(kept) if kept else "")
+                return web.Response(
+                    status=302, headers={"Location": location, "Cache-Control": "no-store"}
+                )
             if not made:
                 made.append(page_html(state))
             return web.Response(text=made[0], content_type="text/html")

@@ -243,7 +243,7 @@ class Launcher:
         self.sessions[session_id] = child
         self._ensure_spare()
         log.info("session %s: process %d on port %d", session_id[:6], child.pid, child.port)
-        settings = [(k, v) for k, v in request.query.items() if k != "token"]
+        settings = routes.page_settings(request)
         target = f"/s/{session_id}/" + ("?" + routes.query_string(settings) if settings else "")
         if not await finish(page, move_html(f"{target}#token={routes.quoted(self.token)}", nonce)):
             await self.end_session(session_id, "its tab closed before the session started")

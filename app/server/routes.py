@@ -105,9 +105,16 @@ def safe_rest(rest: str) -> bool:
     return not any(seg in (".", "..") for seg in rest.split("/"))
 
 
+def page_settings(request: web.Request) -> list[tuple[str, str]]:
+    """The request's query settings a page may be given: not the token (it stays in the cookie
+    or the address's fragment), nor the framework's (``index_page.FRAMEWORK_KEYS``)."""
+    framework = index_page.FRAMEWORK_KEYS
+    return [(k, v) for k, v in request.query.items() if k != "token" and k.lower() not in framework]
+
+
 def root_link(request: web.Request) -> str:
     """The launcher's root with the request's settings (its token stays in the cookie)."""
-    query = [(k, v) for k, v in request.query.items() if k != "token"]
+    query = page_settings(request)
     return "/" + ("?" + query_string(query) if query else "")
 
 

@@ -93,3 +93,22 @@ def test_the_answer_is_refused_a_path_the_client_would_change_by_lowercasing_it(
     assert index_page.session_manager_answer("/s/ab12") == {"sessionURL": "ws://USE_HOST/s/ab12/ws"}
     with pytest.raises(ValueError, match="lowercase"):
         index_page.session_manager_answer("/s/aB12")
+
+
+def test_a_link_naming_the_frameworks_connection_settings_is_served_without_them(app):  # noqa: F811
+    """trame's page takes ``sessionURL``, ``secret`` and the like from its own address: a link
+    naming them (any case) is sent on without them, the app's own settings and the token kept."""
+    link = f"{app.url}&sessionURL=ws://evil.example/ws&SECRET=x&pitch_deg=30"
+
+    class Stay(urllib.request.HTTPRedirectHandler):
+        def redirect_request(self, *args, **kwargs):
+            return None  # see the redirect itself
+
+    opener = urllib.request.build_opener(Stay)
+    with pytest.raises(urllib.error.HTTPError) as seen:
+        opener.open(link, timeout=30)
+    assert seen.value.code == 302
+    location = seen.value.headers["Location"]
+    assert "pitch_deg=30" in location and "token=" in location
+    assert "evil" not in location and "secret" not in location.lower()
+    assert http_get(link)[0] == 200  # followed: the page

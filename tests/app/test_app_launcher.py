@@ -485,7 +485,7 @@ def test_the_door_says_at_once_that_the_session_is_starting_and_moves_the_tab_wh
     async def body():
         async with serving(caps(spare=False)) as (launcher, base, client):
             gate = gated(launcher)
-            url = f"{base}/?token={TOKEN}&pixels=32"
+            url = f"{base}/?token={TOKEN}&pixels=32&sessionURL=ws%3A%2F%2Fevil.example%2Fws"
             answering = client.get(url, allow_redirects=False, headers=NAVIGATION)
             async with await asyncio.wait_for(answering, WAIT_S) as answer:
                 assert answer.status == 200
@@ -498,6 +498,7 @@ def test_the_door_says_at_once_that_the_session_is_starting_and_moves_the_tab_wh
             location = json.loads(MOVE.search(rest)[1])
             (session_id,) = launcher.sessions
             assert location.startswith(f"/s/{session_id}/?pixels=32")
+            assert "evil" not in location  # trame's page would read it as where to connect
             assert cookies[lau.session_cookie(session_id)] == launcher.sessions[session_id].secret
             port = urllib.parse.urlsplit(base).port
             assert cookies[f"lmapd-token-{port}"] == TOKEN  # the address's token, kept

@@ -68,7 +68,7 @@ class PoseTrack:
         self.estimates: dict[int, FrameEstimate] = {}
         self.context: Any = None
         self.n_dropped = 0  # registrations dropped as stale (their result thrown away)
-        self._models: dict[int, tracking.ModelCloud] = {}  # id(TargetModel) -> its points
+        self._sampled: tuple[Any, tracking.ModelCloud] | None = None  # (TargetModel, points)
         self._generation = 0
         self._waiting: _Job | None = None
         self._lock = threading.Condition()
@@ -189,7 +189,8 @@ class PoseTrack:
         return out
 
     def _model(self, target_model: Any) -> tracking.ModelCloud:
-        key = id(target_model)
-        if key not in self._models:
-            self._models = {key: tracking.model_points(target_model)}  # one target at a time
-        return self._models[key]
+        """The model's points of ``target_model``, sampled once (one target at a time: the
+        model is held, so that it is this one, not another at its address)."""
+        if self._sampled is None or self._sampled[0] is not target_model:
+            self._sampled = (target_model, tracking.model_points(target_model))
+        return self._sampled[1]

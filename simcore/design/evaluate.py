@@ -28,6 +28,7 @@ from ..scene import Scene, SceneError, with_overrides
 from .study import Study, StudyError, Track
 
 PROBE_PIXELS = 8  # the tiny frame that lists the figures a study may require
+_MODELS_KEPT = 4  # targets whose model points a study that tracks keeps sampled
 # a frame's figures of a pose track (a study that tracks): its errors against the truth
 # (infinite where the frame is lost), whether it is lost (0 or 1), the share of its track's
 # frames lost, and the registration's fitness
@@ -218,6 +219,8 @@ class Evaluator:
 
         key = repr(scene.target)
         if key not in self._models:
+            if len(self._models) >= _MODELS_KEPT:  # a target variable: a few targets at a time
+                self._models.pop(next(iter(self._models)))
             model = load_target(scene.target)
             self._models[key] = (model, tracking.model_points(model))
         model, cloud_model = self._models[key]

@@ -147,6 +147,7 @@ def client_keys() -> dict[str, security.Screen]:
     keys.update(
         {
             "fly_playing": security.scalar,
+            "fly_track": security.boolean,  # the pose track's switch
             "main_drawer": security.boolean,
             "upload_file": security.file_upload,
             "upload_scale": security.scalar,

@@ -41,8 +41,10 @@ __all__ = [
     "global_register",
     "is_lost",
     "model_points",
+    "pose_errors",
     "register",
     "track",
+    "track_frame",
 ]
 
 MODEL_POINTS = 60_000  # [-] points sampled on the mesh (MRO: about 6 cm apart)
@@ -352,6 +354,37 @@ def is_lost(reg: Registration) -> bool:
     return reg.n_points < MIN_POINTS or reg.fitness < MIN_FITNESS
 
 
+def track_frame(
+    points_m: np.ndarray,
+    model: ModelCloud,
+    previous: list[tuple[float, np.ndarray]],
+    t_s: float,
+    seed: int = 0,
+) -> Registration:
+    """One frame of :func:`track`: its points (n, 3) [m, sensor frame] registered from the
+    prediction of ``previous`` (the last one or two frames not lost, (t [s], T_sensor_target),
+    in time order) at ``t_s``, re-centred on the cloud if that fails the lost rule; with no
+    ``previous``, or when both fail, by :func:`global_register` (``seed`` its draw)."""
+    points = np.ascontiguousarray(points_m, dtype=np.float64)
+    reg = None
+    if previous:
+        predicted = _predict(previous, t_s)
+        reg = register(points, model, predicted)
+        if is_lost(reg) and reg.n_points >= MIN_POINTS:  # the prediction's centre off
+            again = register(points, model, _recentred(predicted, points, model))
+            reg = Registration(
+                again.pose, again.fitness, again.n_points, again.seconds + reg.seconds, "recentred"
+            )
+    if reg is None or (is_lost(reg) and reg.n_points >= MIN_POINTS):  # (re-)acquire
+        spent = reg.seconds if reg is not None else 0.0
+        reg = global_register(points, model, seed=seed)
+        if spent:
+            reg = Registration(
+                reg.pose, reg.fitness, reg.n_points, reg.seconds + spent, "reacquired"
+            )
+    return reg
+
+
 def track(
     clouds,
     model: Any,
@@ -388,27 +421,9 @@ def track(
     out: dict[str, list] = {k: [] for k in ("pose", "rot", "tra", "fit", "n", "lost", "m", "s")}
     for i, cloud in enumerate(clouds):
         t_s = float(truth.t_s[i])
-        points = np.asarray(cloud.points, dtype=np.float64)
-        reg = None
-        if previous:
-            predicted = _predict(previous, t_s)
-            reg = register(points, cloud_model, predicted)
-            if is_lost(reg) and reg.n_points >= MIN_POINTS:  # the prediction's centre off
-                again = register(points, cloud_model, _recentred(predicted, points, cloud_model))
-                reg = Registration(
-                    again.pose,
-                    again.fitness,
-                    again.n_points,
-                    again.seconds + reg.seconds,
-                    "recentred",
-                )
-        if reg is None or (is_lost(reg) and reg.n_points >= MIN_POINTS):  # (re-)acquire
-            spent = reg.seconds if reg is not None else 0.0
-            reg = global_register(points, cloud_model, seed=seed)
-            if spent:
-                reg = Registration(
-                    reg.pose, reg.fitness, reg.n_points, reg.seconds + spent, "reacquired"
-                )
+        reg = track_frame(
+            np.asarray(cloud.points, dtype=np.float64), cloud_model, previous, t_s, seed
+        )
         lost = is_lost(reg)
         if lost:
             previous.clear()  # the next frame starts again with no prior

@@ -104,6 +104,7 @@ class AppLogic:
             fov_rad=self.base_scene.receive.fov_rad,
             runner=self.runner,
             resubmit=self.on_controls_change,
+            on_ui_thread=self._on_ui_thread,  # the pose track's estimates, from its worker
         )
         self.uploads = TargetUploads(  # users' meshes (their own state)
             server,
@@ -138,6 +139,7 @@ class AppLogic:
         server.trigger("open_physics")(self.physics.open)
         server.trigger("close_physics")(self.physics.close)
         server.controller.on_server_exited.add(lambda **_: self.runner.close())
+        server.controller.on_server_exited.add(lambda **_: self.flyaround.pose_track.close())
 
     @property
     def controls(self) -> Controls:
@@ -572,6 +574,7 @@ class AppLogic:
             self.state.update(update)
             # busy while a newer request than this frame's is under way (or a frame is held)
             self.state.busy = not self.runner.is_current(outcome.generation)
+            self.flyaround.frame_pushed(frame.result, self.engine.frame)  # its pose track
         if reframe:
             # the camera itself: this call may reach the page before the state does
             self.server.js_call("scene_view", "setCamera", camera)

@@ -8,6 +8,12 @@ newest request's frame has been drawn by the page, and at most every ``min_inter
 
 ``FlyaroundPoses`` and ``Player`` are plain objects (tested with a fake clock);
 ``FlyaroundLogic`` binds them to the trame state and to ``AppLogic``.
+
+The "Track pose" switch (``fly_track``) registers each frame shown to the target's model in the
+background (``app.logic.pose_track``, seeded by the frames before it), draws the true and the
+estimated target frames as two triads in the 3D view and the errors along the track so far
+(``app.payloads.track``). While it is on, play steps only once the frame shown is tracked, so
+that each frame is seeded by the one before.
 """
 
 from __future__ import annotations
@@ -22,6 +28,8 @@ from typing import Any
 import numpy as np
 
 import simcore
+from app.logic.pose_track import FrameEstimate, PoseTrack
+from app.payloads import track as track_payload
 from app.payloads.orbits import OrbitMap
 from simcore import orbit
 
@@ -188,6 +196,8 @@ class FlyaroundLogic:
         resubmit: Callable[[], Any],
         poses: FlyaroundPoses | None = None,
         player: Player | None = None,
+        on_ui_thread: Callable[..., Any] | None = None,
+        track_in_background: bool = True,
     ):
         self.state = state
         self.fov_rad = fov_rad
@@ -199,6 +209,12 @@ class FlyaroundLogic:
         self.map = OrbitMap(self.poses.duration_s, *self.poses.orbits)
         self._drawn_key = ""
         self._timer: asyncio.TimerHandle | None = None
+        # the pose track: the worker's estimates come back through on_ui_thread
+        self._on_ui_thread = on_ui_thread or (lambda call, *args: call(*args))
+        self.pose_track = PoseTrack(
+            lambda e: self._on_ui_thread(self.on_estimate, e), background=track_in_background
+        )
+        self._shown: tuple[int, Any, np.ndarray, Any] | None = None  # index, pose, truth, frame
         self.state.update(
             {
                 "mode": self.controls.mode,
@@ -209,10 +225,16 @@ class FlyaroundLogic:
                 "fly_interval_s": self.poses.interval_s,
                 "fly_readout": self._readout(),
                 "fly_map": None,  # the orbits' map: drawn in fly-around mode only
+                "fly_track": False,
+                "fly_track_chart": None,
+                "fly_track_text": "",
+                "fly_triad_true": None,
+                "fly_triad_estimate": None,
             }
         )
         self.state.change(*STATE_KEYS)(self.on_change)
         self.state.change("fly_playing")(self.on_playing_change)
+        self.state.change("fly_track")(self.on_track_change)
 
     # -- scene -----------------------------------------------------------------------------------
     @property
@@ -256,12 +278,17 @@ class FlyaroundLogic:
             return  # e.g. the first call at server start: the parent submits the first frame
         changed = controls != self.controls
         was_active = self.active
+        moved = controls.t_s != self.controls.t_s
         self.controls = controls
         fixed["fly_readout"] = self._readout()
         fixed["fly_map"] = self._map()
         if not self.active and self.state.fly_playing:
             self.player.pause()
             fixed["fly_playing"] = False
+        if moved:
+            self.pose_track.moved()  # the frame under way is not the one to show any more
+        if not self.active:
+            fixed |= self._no_track()
         self.state.update(fixed)
         if changed and (self.active or was_active):
             self.resubmit()
@@ -283,15 +310,118 @@ class FlyaroundLogic:
             self._drawn_key = key
         self.tick()
 
+    # -- the pose track --------------------------------------------------------------------------
+    def on_track_change(self, fly_track: Any = False, **_: Any) -> None:
+        """The "Track pose" switch: on, the frame shown is tracked now; off, the track is
+        forgotten and its drawings go."""
+        if fly_track is not True:
+            self.pose_track.clear()
+            if fly_track is not False:
+                self.state.fly_track = False
+            self.state.update(self._no_track())
+            return
+        if self._shown is not None and self.active:
+            self._submit_shown()
+
+    def frame_pushed(self, result: simcore.Result, display_frame: Any) -> None:
+        """From the parent: a computed frame is on the page. In fly-around mode with the switch
+        on, its true triad is drawn now and its cloud goes to the pose track."""
+        if not self.active:
+            self._shown = None
+            return
+        index = self.poses.index_of(result.scene.orbit.time_s)
+        truth = track_payload.true_pose(result.hits.pose, result.target.body_from_mesh)
+        self._shown = (index, result, truth, display_frame)
+        if self.state.fly_track is True:
+            self._submit_shown()
+
+    def _submit_shown(self) -> None:
+        assert self._shown is not None
+        index, result, truth, display_frame = self._shown
+        context = self._context(result)
+        same = context == self.pose_track.context
+        estimate = self.pose_track.estimates.get(index) if same else None
+        self.state.update(
+            track_payload.triads(
+                display_frame,
+                result.hits.pose,
+                truth,
+                None if estimate is None else estimate.pose,
+            )
+        )
+        self.pose_track.submit(
+            index,
+            float(self.poses.times_s[index]),
+            result.cloud.points,
+            truth,
+            context,
+            result.target,
+        )
+
+    @staticmethod
+    def _context(result: simcore.Result) -> str:
+        """What a frame's cloud depends on but its time: the scene without its pose and time
+        (another pixel count, energy or target starts the track again)."""
+        import json  # noqa: PLC0415
+
+        scene = result.scene.to_dict()
+        scene.pop("pose", None)
+        scene.get("orbit", {}).pop("time_s", None)
+        return json.dumps(scene, sort_keys=True, default=str)
+
+    def on_estimate(self, estimate: FrameEstimate) -> None:
+        """On the UI thread: a frame tracked. The chart of the track so far; the estimated
+        triad and the readout if it is the frame shown; play may step on."""
+        if self.state.fly_track is not True or not self.active:
+            return
+        if self.pose_track.estimates.get(estimate.index) is not estimate:
+            return  # the track was cleared since (the switch, another scene)
+        series = self.pose_track.series()
+        now = float(self.poses.times_s[self.poses.index_of(self.controls.t_s)])
+        update: dict[str, Any] = {
+            "fly_track_chart": track_payload.error_chart(
+                [e.t_s for e in series],
+                [e.rotation_error_deg for e in series],
+                [e.translation_error_m for e in series],
+                [e.lost for e in series],
+                now_s=now,
+            )
+        }
+        shown = self._shown
+        if shown is not None and shown[0] == estimate.index:
+            _, result, truth, display_frame = shown
+            update |= track_payload.triads(display_frame, result.hits.pose, truth, estimate.pose)
+            update["fly_track_text"] = track_text(estimate)
+        with self.state:
+            self.state.update(update)
+        self.tick()
+
+    def track_ready(self) -> bool:
+        """The frame shown is tracked (always, with the switch off)."""
+        if self.state.fly_track is not True:
+            return True
+        shown = self._shown
+        return shown is not None and shown[0] in self.pose_track.estimates
+
+    def _no_track(self) -> dict[str, Any]:
+        return {
+            "fly_track_chart": None,
+            "fly_track_text": "",
+            "fly_triad_true": None,
+            "fly_triad_estimate": None,
+        }
+
     # -- playing ---------------------------------------------------------------------------------
     def frame_drawn(self) -> bool:
-        """The frame of the newest request is on the page and drawn (nothing newer computing)."""
+        """The frame of the newest request is on the page and drawn (nothing newer computing),
+        and tracked when the pose is tracked."""
         runner = self.runner
         return (
             not runner.busy
             and self.state.frame_generation == runner.generation
             and bool(self._drawn_key)
             and self._drawn_key == self.state.frame_key
+            and self.track_ready()
         )
 
     def tick(self) -> None:
@@ -329,3 +459,14 @@ class FlyaroundLogic:
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None
+
+
+def track_text(estimate: FrameEstimate) -> str:
+    """The readout of a tracked frame: its errors and how it was registered, or lost."""
+    if estimate.lost:
+        return f"Pose track: lost at this frame ({estimate.method}); the next starts again"
+    return (
+        f"Pose track: rotation error {estimate.rotation_error_deg:.2f}°, translation error "
+        f"{100 * estimate.translation_error_m:.1f} cm ({estimate.method}, "
+        f"{estimate.seconds:.2f} s)"
+    )

@@ -1,13 +1,15 @@
 """The drawer's mode switch (single frame / fly-around) and the fly-around panel: time slider,
-play/pause, the J2 switch, a readout of the frame's time, distance and attitude, and a map of the
-orbits."""
+play/pause, the J2 switch, a readout of the frame's time, distance and attitude, a map of the
+orbits, and the "Track pose" switch with its readout and the errors along the track (the true
+and estimated target frames are drawn in the 3D scene: ``app.ui.views3d``)."""
 
 from __future__ import annotations
 
 from trame.widgets import html, plotly
 from trame.widgets import vuetify3 as v3
 
-from app.ui.widgets import a11y_attributes, button_toggle
+from app.payloads.track import ESTIMATE_COLOR, TRUE_COLOR
+from app.ui.widgets import a11y_attributes, button_toggle, html_attributes
 
 FOV_HINT = (
     "Pose from the two orbits of Table 3 (lidar tracking the target). At about 200 m the 30 mrad "
@@ -89,7 +91,39 @@ def flyaround_panel() -> None:
                         html.Td(label)
                         html.Td(f"{{{{ fly_readout.{key} }}}}", classes="stat-value")
         html.Div(FOV_HINT, classes="text-caption hint fly-hint mt-1")
+        pose_track()
         orbit_map()
+
+
+def pose_track() -> None:
+    """The "Track pose" switch: each frame shown registered to the target's model in the
+    background (app.logic.pose_track); its errors and a chart along the track so far."""
+    v3.VSwitch(
+        model_value=("fly_track",),
+        update_modelValue="fly_track = $event",
+        label="Track pose",
+        density="compact",
+        hide_details=True,
+        color="primary",
+        classes="fly-track",
+        title="Register each frame's cloud to the target's model, seeded by the frame before",
+    )  # its accessible name: the label's "Track pose"
+    with html.Div(v_if="fly_track", classes="fly-track-panel"):
+        html.Div(
+            "{{ fly_track_text || 'Tracking the frame shown...' }}",
+            classes="text-body-2 fly-track-text",
+            **html_attributes(aria_live="polite"),
+        )
+        with html.Div(classes="text-caption hint"):
+            html.Span("In the 3D scene: the true target frame ")
+            html.Span("(green)", style=f"color: {TRUE_COLOR}; font-weight: 500")
+            html.Span(" and the estimated one ")
+            html.Span("(magenta)", style=f"color: {ESTIMATE_COLOR}; font-weight: 500")
+            html.Span("; the longest axis is x, the shortest z.")
+        with html.Div(v_if="fly_track_chart", classes="chart-box fly-track-box"):
+            plotly.Figure(
+                state_variable_name="fly_track_chart", display_mode_bar=False, responsive=True
+            )
 
 
 def orbit_map() -> None:

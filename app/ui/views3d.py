@@ -22,13 +22,15 @@ from trame.widgets import vuetify3 as v3
 from app.payloads import encode
 from app.payloads.scene3d import EARTH_COLOR, SUN_COLOR
 from app.payloads.style import HIDDEN_COLOR
+from app.payloads.track import ESTIMATE_COLOR, TRUE_COLOR
 from app.ui.widgets import html_attributes
 
 BACKGROUND = "[0.102, 0.110, 0.137]"  # #1a1c23
 BACKGROUND_RGB = (26, 28, 35)
 HIDDEN_RGB = [round(c / 255, 3) for c in encode.rgb_of(HIDDEN_COLOR)]
-SUN_RGB, EARTH_RGB = (
-    [round(c / 255, 3) for c in encode.rgb_of(x)] for x in (SUN_COLOR, EARTH_COLOR)
+SUN_RGB, EARTH_RGB, TRUE_RGB, ESTIMATE_RGB = (
+    [round(c / 255, 3) for c in encode.rgb_of(x)]
+    for x in (SUN_COLOR, EARTH_COLOR, TRUE_COLOR, ESTIMATE_COLOR)
 )
 
 
@@ -156,6 +158,15 @@ def scene_card() -> None:
                     actor=("{ visibility: !!frustum }",),  # no input before the first frame
                 ):
                     vtkw.VtkMesh("frustum", state=(_bin("frustum"),))
+                # the pose track's triads: the true one wide, the estimate thin over it (where
+                # they coincide both show)
+                for name, rgb, width in (("true", TRUE_RGB, 6), ("estimate", ESTIMATE_RGB, 2)):
+                    with vtkw.VtkGeometryRepresentation(
+                        id=f"fly_triad_{name}",
+                        property=(f"{{ color: {rgb}, lineWidth: {width}, lighting: false }}",),
+                        actor=(f"{{ visibility: !!fly_triad_{name} }}",),
+                    ):
+                        vtkw.VtkMesh(f"fly_triad_{name}", state=(_bin(f"fly_triad_{name}"),))
                 for name, rgb in (("sun", SUN_RGB), ("earth", EARTH_RGB)):  # seen from the target
                     with vtkw.VtkGeometryRepresentation(
                         id=f"{name}_arrow",

@@ -11,7 +11,9 @@ the costs to minimise. ``run`` searches with optuna (``simcore.design.search``),
 design over the envelope with a Pipeline kept per envelope point (``simcore.design.evaluate``; a
 variable re-runs only the stages it touches there), polishes the cheapest feasible design along
 its cost variable, confirms the front at the reference preset, and writes what
-``simcore.design.report`` describes into the output folder. The model: docs/design.md.
+``simcore.design.report`` describes into the output folder. A study that requires a pose
+track's figures (``track.*``) has the trajectory's frames as its envelope points, each track
+registered in time order (``design.study``'s docstring). The model: docs/design.md.
 """
 
 from __future__ import annotations
@@ -165,7 +167,11 @@ def run(
     bar = tqdm(total=n_trials, desc=f"design {study.name}", unit="trial", disable=not progress)
     try:
         with _Executor(range(n_trials), workers, scheduler, client, 30.0) as submit:
-            evaluator = Evaluator(getattr(submit, "client", None), quality=study.uses_quality)
+            evaluator = Evaluator(
+                getattr(submit, "client", None),
+                quality=study.uses_quality,
+                track=bool(study.tracks),
+            )
             screened = search(study, n_trials, evaluator, state, out, cache, previous, bar.update)
             best = cheapest(screened)
             if best is not None:

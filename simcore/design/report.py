@@ -383,6 +383,13 @@ def report_text(study, records, front, winner, confirmed, tally, wall_s: float) 
         "Minimised: " + ", ".join(study.minimize) + ".",
         "",
     ]
+    if study.tracks:
+        n = len(study.tracks)
+        lines[-1:-1] = [
+            f"Tracked: the envelope points are the {len(study.envelope)} frames of {n} "
+            f"{'trajectory' if n == 1 else 'trajectories'}, each tracked in time order "
+            "(`simcore.tracking.track`); a lost frame's `track.*` errors count as infinite.",
+        ]
     if winner is None and confirmed:
         lines += [
             "## No design is confirmed",

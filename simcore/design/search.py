@@ -63,7 +63,31 @@ class Record:
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> Record:
-        return cls(**{k: data[k] for k in cls.__dataclass_fields__ if k in data})
+        """A record from its file's JSON, the numbers ``io.write_json`` wrote as null (NaN) or
+        "inf" (a lost frame's error) read back as floats."""
+        fields = {k: data[k] for k in cls.__dataclass_fields__ if k in data}
+        for key in _NUMBER_LISTS:
+            fields[key] = [_number(v) for v in fields[key]]
+        fields["points"] = [
+            {k: v if k == "error" else _number(v) for k, v in p.items()} for p in fields["points"]
+        ]
+        return cls(**fields)
+
+
+_NON_FINITE = {"inf": math.inf, "-inf": -math.inf}
+
+
+def _number(value: Any) -> Any:
+    """A JSON number back as ``io.write_json`` wrote it: null is NaN, "inf" and "-inf" are
+    infinities; anything else as it is."""
+    if value is None:
+        return math.nan
+    return _NON_FINITE.get(value, value) if isinstance(value, str) else value
+
+
+def _is_number(value: Any) -> bool:
+    number = _number(value)
+    return isinstance(number, int | float) and not isinstance(number, bool)
 
 
 @dataclass
@@ -105,8 +129,7 @@ def record_problem(data: Any) -> str | None:
         and all(isinstance(p, dict) for p in data["points"]),
         "feasible": isinstance(data["feasible"], bool),
         **{
-            key: isinstance(data[key], list)
-            and all(isinstance(v, int | float) and not isinstance(v, bool) for v in data[key])
+            key: isinstance(data[key], list) and all(_is_number(v) for v in data[key])
             for key in _NUMBER_LISTS
         },
     }
@@ -180,6 +203,9 @@ def evaluate_designs(
     for i, point, outcome in evaluator.evaluate(jobs):
         state.tally.add(outcome)
         outcomes[i][point] = outcome
+    if study.tracks:  # each track's frames registered in time order, once all are in
+        for i in scenes_ok:
+            outcomes[i] = evaluator.track(study, designs[i], preset, outcomes[i])
     for i in scenes_ok:
         points = [outcomes[i][p] for p in range(len(study.envelope))]
         done[i] = _record(study, 0, stage, preset, designs[i], points, None)

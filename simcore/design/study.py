@@ -28,6 +28,15 @@ file's reading and checks are ``study_file``'s.
     [requirements]                 # figure = "OP BOUND [at worst | at pNN | at median]"
     "quality.recall" = ">= 0.8"
     "quality.range_rmse_m" = "<= 0.02 at p90"
+    "track.translation_error_m" = "<= 0.1 at median"   # a pose track over the trajectory
+
+A study that requires a ``track.*`` figure is evaluated along the base scene's trajectory (its
+``[trajectory]``: an approach or a hold, or ``[envelope.flyaround]`` times along the orbits): the
+envelope's points ARE the trajectory's frames, once per condition of the other envelope entries
+(each condition one ``Track``), so that every requirement, the imaging ones too, aggregates over
+the frames, and a track figure is a frame's like any other (``design.evaluate`` registers the
+frames of each track in time order, as ``simcore.tracking.track`` does). A lost frame's errors are
+infinite: it fails a requirement "at worst" and counts against a median or a percentile.
 
     [objectives]
     minimize = ["laser.pulse_energy_j", "receive.aperture_area_m2"]   # or ["cost"] with:
@@ -71,7 +80,7 @@ STUDY_KEYS = (
     "objectives",
 )
 ENVELOPE_LISTS = ("sun",)  # envelope entries that are tables of a section's keys
-MAX_ENVELOPE = 256  # envelope points at most (each trial runs them all)
+MAX_ENVELOPE = 256  # envelope points at most (each trial runs them all; a track: each frame)
 MAX_TRIALS = 100_000
 # derived cost figures an objective may name, besides any numeric scene key
 DERIVED = {
@@ -85,7 +94,9 @@ FRACTIONS = re.compile(
 )
 NON_NEGATIVE = re.compile(
     r"(^|\.)(n_\w+|\w*_rmse_m|\w*_p95_m|\w*sigma\w*|\w*_per_m2|\w*area_m2|snr\w*)$"
+    r"|^track\.\w+_error_(deg|m)$"
 )
+TRACK_PREFIX = "track."  # the figures of a pose track (design.evaluate.TRACK_FIGURES)
 REQUIREMENT = re.compile(
     r"^\s*(>=|<=)\s*([-+0-9.eE]+|inf)\s*(?:at\s+(worst|median|mean|p\d{1,2}))?\s*$"
 )
@@ -131,11 +142,11 @@ class Requirement:
         if self.over == "mean":
             return float(np.mean(v))
         if self.over == "median":
-            return float(np.median(v))
+            return _percentile(v, 50.0)
         share = 100.0 if self.over == "worst" else float(self.over[1:])
         # NN % of the points must meet it: the (100 - NN)th percentile for >=, the NNth for <=
         q = 100.0 - share if self.op == ">=" else share
-        return float(np.percentile(v, q))
+        return _percentile(v, q)
 
     def margin(self, value: float) -> float:
         """How far ``value`` meets the bound (negative: by how much it fails), in the figure's
@@ -152,6 +163,35 @@ class Requirement:
     def text(self) -> str:
         at = "" if self.over == "worst" else f" at {self.over}"
         return f"{self.figure} {self.op} {self.bound:g}{at}"
+
+
+def _percentile(v: np.ndarray, q: float) -> float:
+    """numpy's (linear) percentile, where infinities (a lost frame's error) stay infinite: between
+    two infinite order statistics it is that infinity, not numpy's NaN of inf - inf."""
+    if np.isfinite(v).all():
+        return float(np.percentile(v, q))
+    s = np.sort(v)
+    h = (len(s) - 1) * q / 100.0
+    lo, hi = s[math.floor(h)], s[math.ceil(h)]
+    frac = h - math.floor(h)
+    if frac == 0.0 or lo == hi:
+        return float(lo)
+    if math.isinf(hi):  # the line up to an infinity is infinite past its start
+        return float(hi)
+    if math.isinf(lo):
+        return float(lo)
+    return float(lo + frac * (hi - lo))
+
+
+@dataclass(frozen=True, eq=False)
+class Track:
+    """One pose track of a study: the envelope points that are its frames, in time order, and
+    their relative pose (``flyaround.pose_series`` of the condition's scene at the frame times),
+    imaged with ``j2`` or not."""
+
+    points: tuple[int, ...]
+    pose: Any  # orbit.RelativePose
+    j2: bool = False
 
 
 @dataclass(frozen=True)
@@ -174,6 +214,7 @@ class Study:
     cost: dict[str, float] = field(default_factory=dict)
     source: str = "<python>"
     text: str = ""
+    tracks: tuple[Track, ...] = field(default=(), compare=False)  # a study that tracks (above)
 
     @property
     def fingerprint(self) -> str:
@@ -198,6 +239,11 @@ class Study:
     @property
     def uses_quality(self) -> bool:
         return any(r.figure.startswith("quality.") for r in self.requirements)
+
+    @property
+    def uses_track(self) -> bool:
+        """Whether a requirement is on a pose track's figure (``track.*``)."""
+        return any(r.figure.startswith(TRACK_PREFIX) for r in self.requirements)
 
 
 def _frame_pulses(scene: Scene) -> int:

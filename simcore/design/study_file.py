@@ -26,12 +26,31 @@ from .study import (
     REQUIREMENT,
     STUDIES_DIR,
     STUDY_KEYS,
+    TRACK_PREFIX,
     Requirement,
     Study,
     StudyError,
+    Track,
     Variable,
     cost_figure,
 )
+
+# the keys each frame of a trajectory sets (the pose, the orbit's time): no envelope condition
+# nor variable of a study that tracks may set them, nor may a variable move the trajectory
+FRAME_KEYS = (
+    "pose.quaternion_wxyz",
+    "pose.distance_m",
+    "pose.pitch_deg",
+    "pose.azimuth_deg",
+    "pose.roll_deg",
+    "orbit.time_s",
+    "orbit.j2",
+)
+
+
+def _sets_frames(key: str) -> bool:
+    dotted = QUICK.get(key, key)
+    return dotted in FRAME_KEYS or dotted.startswith("trajectory.")
 
 
 def builtin_studies() -> list[str]:
@@ -74,7 +93,13 @@ def study_from_dict(
         with_overrides(base, fixed)
     except SceneError as exc:
         raise StudyError(f"{where} [set]: {exc}") from None
-    envelope = _envelope(_table(data, "envelope", where), where, with_overrides(base, fixed))
+    requirements = tuple(
+        _requirement(k, v, where) for k, v in _table(data, "requirements", where).items()
+    )
+    tracked = next((r.figure for r in requirements if r.figure.startswith(TRACK_PREFIX)), None)
+    envelope, tracks = _envelope(
+        _table(data, "envelope", where), where, with_overrides(base, fixed), tracked
+    )
     variables = tuple(
         _variable(k, v, base, where) for k, v in _table(data, "variables", where).items()
     )
@@ -83,9 +108,12 @@ def study_from_dict(
     clash = sorted({v.key for v in variables} & {QUICK.get(k, k) for k in fixed})
     if clash:
         raise StudyError(f"{where}: {clash[0]!r} is both fixed in [set] and a variable")
-    requirements = tuple(
-        _requirement(k, v, where) for k, v in _table(data, "requirements", where).items()
-    )
+    moving = [v.key for v in variables if _sets_frames(v.key)]
+    if tracked and moving:
+        raise StudyError(
+            f"{where} [variables] {moving[0]}: a study that tracks takes its frames from the "
+            "trajectory, the same for every design; fix it in [set] or vary it in [envelope]"
+        )
     minimize, cost = _objectives(_table(data, "objectives", where), base, where)
     study = Study(
         name=str(data.get("name", "study")),
@@ -104,6 +132,7 @@ def study_from_dict(
         cost=cost,
         source=source,
         text=text if text is not None else _as_toml(data),
+        tracks=tracks,
     )
     _check_points(study, where)
     return study
@@ -168,15 +197,23 @@ def _values(value, key: str, where: str) -> list:
     return values
 
 
-def _envelope(table: Mapping[str, Any], where: str, scene: Scene) -> tuple[dict[str, Any], ...]:
+def _envelope(
+    table: Mapping[str, Any], where: str, scene: Scene, tracked: str | None = None
+) -> tuple[tuple[dict[str, Any], ...], tuple[Track, ...]]:
     """Every envelope point as scene overrides: the product of the lists (the fly-around's
-    frames one of them), then the points."""
+    frames one of them), then the points; and no tracks. A study that tracks (``tracked``: its
+    first ``track.*`` figure) takes them as conditions instead, each run along the trajectory
+    (:func:`_track_points`)."""
     axes: list[list[dict[str, Any]]] = []
+    flyaround = None
     for key, value in table.items():
         if key == "points":
             continue
         if key == "flyaround":
-            axes.append(_flyaround_points(value, scene, where))
+            if tracked:
+                flyaround = _flyaround_spec(value, where)
+            else:
+                axes.append(_flyaround_points(value, scene, where))
             continue
         if key in ENVELOPE_LISTS:
             entries = _values(value, key, where)
@@ -197,6 +234,8 @@ def _envelope(table: Mapping[str, Any], where: str, scene: Scene) -> tuple[dict[
     if not isinstance(explicit, list) or not all(isinstance(p, Mapping) for p in explicit):
         raise StudyError(f"{where}: [[envelope.points]] must be an array of tables")
     points += [dict(p) for p in explicit]
+    if tracked:
+        return _track_points(points or [{}], flyaround, scene, where, tracked)
     if not points:
         raise StudyError(
             f"{where}: the [envelope] is empty; give at least one condition (e.g. "
@@ -207,7 +246,92 @@ def _envelope(table: Mapping[str, Any], where: str, scene: Scene) -> tuple[dict[
             f"{where}: the envelope has {len(points)} points, more than {MAX_ENVELOPE}; "
             "each trial runs them all: take fewer values"
         )
-    return tuple(points)
+    return tuple(points), ()
+
+
+def _track_points(
+    conditions: list[dict[str, Any]],
+    flyaround: tuple[list[float], bool] | None,
+    scene: Scene,
+    where: str,
+    figure: str,
+) -> tuple[tuple[dict[str, Any], ...], tuple[Track, ...]]:
+    """The envelope of a study that tracks: each condition (a point of the product, or an
+    explicit one) once per frame of its trajectory, the frames in time order, one Track each.
+    The frames are the ``[envelope.flyaround]`` times if given, else those of the condition's
+    ``[trajectory]`` (an approach or a hold: ``trajectory.frame_times``); an orbit with no
+    times is no trajectory to track. Every frame counts against MAX_ENVELOPE, refused before
+    any pose is computed."""
+    from .. import orbit, trajectory  # noqa: PLC0415  (only for a study that tracks)
+    from ..flyaround import pose_series  # noqa: PLC0415
+
+    times: list[tuple[Scene, list[float], bool]] = []
+    for c in conditions:
+        clash = [k for k in c if _sets_frames(k) and not QUICK.get(k, k).startswith("trajectory.")]
+        if clash:
+            raise StudyError(
+                f"{where} [envelope] {clash[0]}: in a study that tracks, the trajectory sets "
+                "each frame's pose and time; give them by [trajectory] or [envelope.flyaround]"
+            )
+        try:
+            condition_scene = with_overrides(scene, c)
+        except SceneError as exc:
+            raise StudyError(f"{where} [envelope] {c}: {exc}") from None
+        if flyaround is not None:
+            times.append((condition_scene, *flyaround))
+        elif condition_scene.trajectory.kind != "orbit":
+            frames = trajectory.frame_times(condition_scene)
+            times.append((condition_scene, [float(t) for t in frames], False))
+        else:
+            raise StudyError(
+                f"{where} [requirements] {figure}: a pose track needs a trajectory: give the "
+                'base scene (or [set]) trajectory.kind = "approach" or "hold", or '
+                "[envelope.flyaround] times along the orbits"
+            )
+    total = sum(len(t) for _, t, _ in times)
+    if total > MAX_ENVELOPE:
+        counts = sorted({len(t) for _, t, _ in times})
+        frames = f"{counts[0]}" if len(counts) == 1 else f"{counts[0]}-{counts[-1]}"
+        raise StudyError(
+            f"{where}: the envelope has {total} points ({frames} trajectory frames x "
+            f"{len(times)} conditions), more than {MAX_ENVELOPE}; each trial runs them all: "
+            "take fewer frames (trajectory.duration_s, frame_rate_hz) or fewer conditions"
+        )
+    points: list[dict[str, Any]] = []
+    tracks = []
+    for c, (condition_scene, t_s, j2) in zip(conditions, times, strict=True):
+        try:
+            pose = pose_series(condition_scene, t_s, j2=j2)
+        except (orbit.OrbitError, SceneError, ValueError) as exc:
+            raise StudyError(f"{where} [envelope] {c}: the trajectory: {exc}") from None
+        first = len(points)
+        points += [{**c, **frame} for frame in _frame_overrides(pose, j2)]
+        tracks.append(Track(points=tuple(range(first, len(points))), pose=pose, j2=j2))
+    return tuple(points), tuple(tracks)
+
+
+def _flyaround_spec(spec, where: str) -> tuple[list[float], bool]:
+    """The times [s] and the J2 switch of ``[envelope.flyaround]``."""
+    if not isinstance(spec, Mapping) or "times_s" not in spec or set(spec) - {"times_s", "j2"}:
+        raise StudyError(
+            f"{where} [envelope.flyaround]: give times_s = [...] (or {{start, stop, num}}) [s] "
+            "and optionally j2 = true"
+        )
+    times = [float(t) for t in _values(spec["times_s"], "flyaround.times_s", where)]
+    return times, bool(spec.get("j2", False))
+
+
+def _frame_overrides(pose, j2: bool) -> list[dict[str, Any]]:
+    """Each frame of ``pose`` (a RelativePose) as the scene keys ``lmapd flyaround`` sets."""
+    return [
+        {
+            "pose.quaternion_wxyz": [float(v) for v in pose.quaternion_wxyz[i]],
+            "pose.distance_m": float(pose.distance_m[i]),
+            "orbit.time_s": float(pose.t_s[i]),
+            "orbit.j2": j2,
+        }
+        for i in range(len(pose.t_s))
+    ]
 
 
 def _flyaround_points(spec, scene: Scene, where: str) -> list[dict[str, Any]]:
@@ -218,26 +342,12 @@ def _flyaround_points(spec, scene: Scene, where: str) -> list[dict[str, Any]]:
     from .. import orbit  # noqa: PLC0415  (only for a fly-around envelope)
     from ..flyaround import pose_series  # noqa: PLC0415
 
-    if not isinstance(spec, Mapping) or "times_s" not in spec or set(spec) - {"times_s", "j2"}:
-        raise StudyError(
-            f"{where} [envelope.flyaround]: give times_s = [...] (or {{start, stop, num}}) [s] "
-            "and optionally j2 = true"
-        )
-    times = [float(t) for t in _values(spec["times_s"], "flyaround.times_s", where)]
-    j2 = bool(spec.get("j2", False))
+    times, j2 = _flyaround_spec(spec, where)
     try:
         pose = pose_series(scene, times, j2=j2)
     except (orbit.OrbitError, SceneError, ValueError) as exc:
         raise StudyError(f"{where} [envelope.flyaround]: {exc}") from None
-    return [
-        {
-            "pose.quaternion_wxyz": [float(v) for v in pose.quaternion_wxyz[i]],
-            "pose.distance_m": float(pose.distance_m[i]),
-            "orbit.time_s": float(pose.t_s[i]),
-            "orbit.j2": j2,
-        }
-        for i in range(len(pose.t_s))
-    ]
+    return _frame_overrides(pose, j2)
 
 
 def field_metadata(key: str) -> dict[str, Any]:

@@ -4,7 +4,8 @@ the connection guards, and the patches of trame-server and wslink with the relea
 checked against.
 
 ``launcher`` the sessions and the proxy in front of them, by concern in ``caps`` (the limits),
-``children`` (the session processes, started or forked), ``routes`` (what a request's path and
+``children`` (the session processes, started or forked), ``frame_memory`` (the heavy frames'
+memory budget across sessions, and a session's end of it), ``routes`` (what a request's path and
 cookies say), ``pages`` (the launcher's own pages) and ``proxy`` (a session's pages and websocket
 passed to its process); ``zygote`` the sessions' preloaded parent; ``process`` the serving
 processes (a session's token and address-space limit, the launcher's run, the exit status);

@@ -263,14 +263,14 @@ class Zygote:
     per ``spawn TOKEN`` line; its output tells each token's process and, once it listens, its
     port."""
 
-    def __init__(self, command: list[str]):
+    def __init__(self, command: list[str], env: dict[str, str] | None = None):
         self.command = command
         self.proc: asyncio.subprocess.Process | None = None
         self.reader: asyncio.Task | None = None
         self.ready: asyncio.Future | None = None
         self.pids: dict[str, asyncio.Future] = {}  # token digest -> pid
         self.ports: dict[str, asyncio.Future] = {}  # token -> port
-        self.env: dict[str, str] = {}  # what its environment adds (the launcher's)
+        self.env = {} if env is None else env  # what its environment adds (the launcher's)
         self._lock = asyncio.Lock()
 
     async def _start(self, timeout_s: float) -> None:

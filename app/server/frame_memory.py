@@ -31,6 +31,7 @@ from __future__ import annotations
 import asyncio
 import collections
 import contextlib
+import hmac
 import json
 import logging
 import os
@@ -38,7 +39,7 @@ import shutil
 import socket
 import tempfile
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 from app.engine import FrameRefused
@@ -193,6 +194,22 @@ class FrameMemory:
             if ask.ahead != place:
                 ask.ahead = place
                 _send(ask.writer, {"ahead": place})
+
+
+def budget_for(budget_bytes: int | None, children: Iterable) -> FrameMemory | None:
+    """The launcher's budget of ``budget_bytes`` (None: no budget) for its ``children`` (the
+    set of its session processes, each with its private ``token``: kept up to date by the
+    launcher, read at each request)."""
+    if budget_bytes is None:
+        return None
+
+    def find(token: str):
+        for child in list(children):
+            if child.token and hmac.compare_digest(child.token.encode(), token.encode()):
+                return child
+        return None
+
+    return FrameMemory(budget_bytes, find)
 
 
 def _send(writer: asyncio.StreamWriter, message: dict) -> None:

@@ -31,11 +31,8 @@ port) and proxies everything under ``/s/<session id>/`` to it:
   whose launcher vanishes (even by SIGKILL) stops when its stdin closes;
 * connections (app.server.connections): idle or partial ones are closed after 10 s, each address
   holds at most a few hundred, and refusals are logged one short line each, never with the token;
-* heavy frames in flight across the sessions share one memory budget (``caps.frames_bytes``,
-  app.server.frame_memory): a session asks it on the launcher's Unix socket before a heavy frame
-  and holds its grant while the frame runs; a frame that does not fit waits in a first-come queue
-  (its page says how many frames are ahead), one that could never fit is refused; a session
-  stopped or found dead gives its grants back;
+* heavy frames in flight across the sessions share one memory budget (``caps.frames_bytes``:
+  app.server.frame_memory); a session ended or found dead gives its grants back;
 * with ``zygote`` (``lmapd app``'s default on Linux) the session processes are forked from one
   preloaded parent (app.server.zygote) instead of started afresh: they share its modules, target and
   compiled kernels.
@@ -108,8 +105,9 @@ class Launcher:
         zygote: Callable[..., list[str]] | None = None,
     ):
         self.token = token
+        self.child_env: dict[str, str] = {}  # what the children's environment adds (at startup)
         # sessions forked from a preloaded parent (app.server.zygote): its command, or None
-        self.zygote = Zygote(zygote(scene, options)) if zygote is not None else None
+        self.zygote = Zygote(zygote(scene, options), self.child_env) if zygote is not None else None
         self.caps = caps
         self.scene = scene
         self.command = command
@@ -130,13 +128,7 @@ class Launcher:
         self._reaper: asyncio.Task | None = None
         self._closing = False
         self._all: set[Child] = set()  # every child not yet stopped (sessions, spare)
-        # the heavy frames' budget across sessions (its socket is opened at startup)
-        self.frames = (
-            frame_memory.FrameMemory(caps.frames_bytes, self.child_of_token)
-            if caps.frames_bytes is not None
-            else None
-        )
-        self.child_env: dict[str, str] = {}  # what the children's environment adds
+        self.frames = frame_memory.budget_for(caps.frames_bytes, self._all)  # None: no budget
 
     # -- the application -----------------------------------------------------------------------
     def web_app(self) -> web.Application:
@@ -149,10 +141,8 @@ class Launcher:
 
     async def _on_startup(self, _app) -> None:
         self._client = proxy.client_session()
-        if self.frames is not None:
+        if self.frames is not None:  # the frames' budget: its socket in the children's env
             self.child_env[frame_memory.ENV] = await self.frames.start()
-        if self.zygote is not None:
-            self.zygote.env = self.child_env
         self._ensure_spare()
         self._reaper = asyncio.create_task(self._reap_forever())
 
@@ -368,13 +358,6 @@ class Launcher:
         self.spare = asyncio.create_task(self.start_child())
         self.spare.add_done_callback(_quiet)
 
-    def child_of_token(self, token: str) -> Child | None:
-        """The child whose private token is ``token`` (a session asking the frames' budget)."""
-        for child in self._all:
-            if child.token and hmac.compare_digest(child.token.encode(), token.encode()):
-                return child
-        return None
-
     def children_rss_bytes(self) -> int:
         """The children's total resident memory [bytes]."""
         return sum(child.rss_bytes() for child in self._all)
@@ -388,13 +371,14 @@ class Launcher:
     async def stop_child(self, child: Child, wait_s: float = 10.0) -> None:
         """Stop one process: SIGTERM, then SIGKILL after ``wait_s``."""
         self._all.discard(child)
-        if self.frames is not None:
-            self.frames.release_owner(child)  # its frames' grants, before it is gone
         await child.stop(wait_s)
         upload_folders.remove_folders_of(child.pid)  # a session killed leaves its uploads
 
     def _forget(self, session_id: str) -> Child | None:
-        return self.sessions.pop(session_id, None)
+        child = self.sessions.pop(session_id, None)
+        if child is not None and self.frames is not None:
+            self.frames.release_owner(child)  # its frames' grants go back to the budget
+        return child
 
     async def end_session(self, session_id: str, why: str) -> None:
         """Stop a session: its pages are told (a websocket close that the page shows as "session
@@ -434,8 +418,6 @@ class Launcher:
                 log.warning("session %s: its process exited (%s)", session_id[:6], code)
                 self._forget(session_id)
                 self._all.discard(child)
-                if self.frames is not None and self.frames.release_owner(child):
-                    log.warning("session %s: its frames' memory given back", session_id[:6])
                 upload_folders.remove_folders_of(child.pid)
                 for page in list(child.pages):
                     with contextlib.suppress(Exception):

@@ -5,6 +5,8 @@ as a page does), and the launcher tree's memory sampled while they run."""
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import json
 import threading
 import time
@@ -22,7 +24,8 @@ async def open_page(
     client: aiohttp.ClientSession, base: str, token: str
 ) -> tuple[Client, dict, str]:
     """A tab: the door with the token, the session's websocket, its first frame. (The page, its
-    state, its session id.)"""
+    state, its session id.) From then on a task reads the page's messages (its state pushes go
+    to ``page.states``; the launcher's pings are answered while the page waits)."""
     async with client.get(f"{base}/?token={token}", headers=NAVIGATION) as answer:
         assert answer.status == 200, answer.status
         jar = {k: m.value for k, m in answer.cookies.items()}
@@ -39,7 +42,27 @@ async def open_page(
     state = (await page.call("trame.state.get"))["result"]["state"]
     if not state.get("frame_generation"):
         state = {**state, **await page.wait_state(lambda s: s.get("frame_generation", 0) > 0)}
+    page.reader = asyncio.create_task(_read_forever(page))
     return page, state, path.split("/")[2]
+
+
+async def _read_forever(page: Client) -> None:
+    with contextlib.suppress(ConnectionError, asyncio.CancelledError):
+        await page.receive_until(lambda m: False, wait_s=WAIT_S)
+
+
+async def _send_call(page: Client, method: str, args: list) -> None:
+    """A call whose answer is not waited for (the page's reader takes it)."""
+    await page.send(
+        {"wslink": "1.0", "id": "rpc:c0:0", "method": method, "args": args, "kwargs": {}}
+    )
+
+
+async def close_page(page: Client) -> None:
+    page.reader.cancel()
+    with contextlib.suppress(asyncio.CancelledError):
+        await page.reader
+    await page.ws.close()
 
 
 async def heavy_frame(page: Client, state: dict, **values) -> dict:
@@ -50,18 +73,24 @@ async def heavy_frame(page: Client, state: dict, **values) -> dict:
     first = generation = state.get("frame_generation", 0)
     key = state.get("frame_key")
     if key:
-        await page.call("trame.trigger", ["frame_shown", [key], {}])
+        await _send_call(page, "trame.trigger", ["frame_shown", [key], {}])
     seen = len(page.states)
-    await page.set_state(**values)
+    await _send_call(
+        page, "trame.state.update", [[{"key": k, "value": v} for k, v in values.items()]]
+    )
+    deadline = time.monotonic() + WAIT_S
     while True:
         while len(page.states) == seen:
-            await page.receive_until(lambda m: True, wait_s=WAIT_S)
+            if page.reader.done():
+                return _outcome(page, False, "")  # the connection ended: no answer
+            assert time.monotonic() < deadline, f"no answer in {WAIT_S:g} s"
+            await asyncio.sleep(0.02)
         pushed, seen = page.states[seen], seen + 1
         generation = pushed.get("frame_generation", generation)
         if pushed.get("error_message"):
             return _outcome(page, False, pushed["error_message"])
         if "frame_key" in pushed:
-            await page.call("trame.trigger", ["frame_shown", [pushed["frame_key"]], {}])
+            await _send_call(page, "trame.trigger", ["frame_shown", [pushed["frame_key"]], {}])
             if generation > first and pushed.get("frame_kind") == "preset":
                 return _outcome(page, True, "")
 

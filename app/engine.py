@@ -260,6 +260,14 @@ class Engine:
         release_free_memory()
         return frame
 
+    def memory_needed(self, scene: simcore.Scene, preview: bool = False) -> int:
+        """The memory ``scene``'s frame (or its preview) would take above the engine's [bytes]:
+        its estimate (frame_bytes), or 0 when every stage of it is cached."""
+        pipeline = self.preview_pipeline if preview else self.pipeline
+        if preview:
+            scene = self.preview_scene(scene)
+        return frame_bytes(scene) if pipeline.stages_to_run(scene) else 0
+
     @staticmethod
     def preview_scene(scene: simcore.Scene) -> simcore.Scene:
         """``scene`` at the preview's fidelity (see PREVIEW_FIDELITY)."""

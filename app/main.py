@@ -27,6 +27,7 @@ from app.logic.controller import AppLogic
 from app.server import connections, security
 from app.server.addresses import public_lines, start_message, trame_arguments
 from app.server.children import say
+from app.server.frame_memory import FrameGrants
 from app.server.process import (
     HEADROOM_BYTES,
     interrupt,
@@ -216,6 +217,16 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         f"(default {FRAME_BUDGET_BYTES / 2**20:g} MB)",
     )
     parser.add_argument(
+        "--frames-in-flight-mb",
+        type=float,
+        default=None,
+        help="the heavy frames being computed in all tabs' sessions together may take this much "
+        "memory, by their estimates: a frame that does not fit waits its turn (its page says "
+        "how many frames are ahead), one over it is refused (default: the memory cap less the "
+        "sessions' own size, at least one --frame-memory-mb; beside --memory-cap-mb, which "
+        "admits new sessions)",
+    )
+    parser.add_argument(
         "--public-url",
         action="append",
         default=[],
@@ -282,6 +293,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if token is not None:
         app.token = token
+        app.logic.frame_grants = FrameGrants.from_environment(token)  # the launcher's budget
         signal.signal(signal.SIGTERM, interrupt)  # the launcher stops its sessions gracefully
         limit_address_space(budget + HEADROOM_BYTES)  # one session cannot take the machine
     origins = tuple(args.public_url)

@@ -13,6 +13,7 @@ are applied only if they are still the newest generation.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import dataclasses
 import threading
 import time
@@ -21,7 +22,7 @@ from typing import Any
 import numpy as np
 
 import simcore
-from app.engine import Engine, Frame, FrameRefused, Preview, Request
+from app.engine import Engine, Frame, FrameRefused, Preview, Request, check_memory
 from app.logic import exports
 from app.logic.attitudes import AttitudeMap
 from app.logic.compare import FrameCompare
@@ -85,6 +86,9 @@ class AppLogic:
         self._controls_of: dict[int, Controls] = {}
         self._shown_controls = initial_controls
         self._keep_message = False  # the next frame is the one shown again after a refusal
+        # the launcher's memory budget for heavy frames across sessions (a session's process
+        # sets it: app.server.frame_memory.FrameGrants); None: this process's own limit only
+        self.frame_grants: Any = None
         self.runner: Runner[Request, Frame] = Runner(
             self._compute,
             self._deliver,
@@ -195,6 +199,7 @@ class AppLogic:
                 "stages": [],
                 "busy": True,
                 "error_message": "",
+                "memory_message": "",  # a heavy frame waiting for the server's memory
                 "input_message": " ".join(startup_messages),
                 "frame_key": "",
                 "frame_generation": 0,
@@ -403,11 +408,36 @@ class AppLogic:
         pixel, no refinement: app.engine.PREVIEW_FIDELITY), so a slider's new value shows in a
         fraction of the frame's time; the frame replaces it when ready."""
         engine, stale = self.engine, self.runner.computing_is_stale
+        generation = self.runner.computing_generation
         if request.preview_first and engine.wants_preview(request.scene):
-            generation = self.runner.computing_generation
-            preview = engine.compute_preview(request, stale=stale)
+            with self._memory_for(engine, request.scene, generation, preview=True):
+                preview = engine.compute_preview(request, stale=stale)
             self._on_ui_thread(self.apply_preview, generation, preview)
-        return engine.compute(request, stale=stale)
+        with self._memory_for(engine, request.scene, generation):
+            return engine.compute(request, stale=stale)
+
+    def _memory_for(self, engine: Engine, scene: simcore.Scene, generation: int, preview=False):
+        """In the worker thread: the launcher's grant for ``scene``'s frame (or its preview), to
+        hold while it computes: at once for a light frame, after a wait for a heavy one that does
+        not fit beside the other sessions' (the page says how many frames are ahead). Raises
+        FrameRefused (over this session's limit, or over the server's budget) and StaleRequest
+        (a newer request came while it waited: its place in the queue is given up)."""
+        if self.frame_grants is None:
+            return contextlib.nullcontext()
+        check_memory(scene, engine.frame_budget_bytes)  # this session's own limit first
+        runner = self.runner
+        return self.frame_grants.ask(
+            engine.memory_needed(scene, preview=preview),
+            overtaken=lambda: not runner.is_current(generation),
+            waiting=lambda ahead: self._on_ui_thread(self._show_memory_wait, generation, ahead),
+        )
+
+    def _show_memory_wait(self, generation: int, ahead: int | None) -> None:
+        """On the UI thread: the page says that its frame waits for the server's memory."""
+        if ahead is None or not self.runner.is_current(generation):
+            self.state.memory_message = ""
+        else:
+            self.state.memory_message = memory_wait_text(ahead)
 
     def _deliver(self, outcome: Outcome[Frame]) -> None:
         """Called in the worker thread: hand the outcome to the event loop."""
@@ -588,6 +618,13 @@ class AppLogic:
 
 
 PREVIEW_LABEL = "preview: 1 ray per pixel"
+
+
+def memory_wait_text(ahead: int) -> str:
+    """What the page says while its frame waits for the server's memory."""
+    if ahead <= 0:
+        return "Waiting for memory: this frame is next (other tabs' frames are using it)"
+    return f"Waiting for memory: {ahead} frame{'s' if ahead != 1 else ''} ahead"
 
 
 def scene_key_labels() -> dict[str, str]:

@@ -5,6 +5,7 @@ checked against.
 
 ``launcher`` the sessions and the proxy in front of them, by concern in ``caps`` (the limits),
 ``ending`` (when a session ends), ``children`` (the session processes, started or forked),
+``frame_memory`` (the heavy frames' memory budget across sessions, and a session's end of it),
 ``routes`` (what a request's path and cookies say), ``pages`` (the launcher's own pages) and
 ``proxy`` (a session's pages and websocket passed to its process); ``zygote`` the sessions'
 preloaded parent; ``process`` the serving processes (a session's token and address-space limit,

@@ -42,6 +42,8 @@ class Caps:
         the one the proxy forwards (``app.server.routes.client_address``)
     sockets_per_session : websockets open at once on one session
     session_bytes : what a session is counted at in the memory cap until it measures more [bytes]
+    frames_bytes : what the heavy frames in flight across the sessions may take together, by
+        their estimates (app.server.frame_memory) [bytes; None: no such budget]
     """
 
     max_sessions: int
@@ -56,6 +58,7 @@ class Caps:
     per_address: int = 6
     sockets_per_session: int = 4
     session_bytes: int = SESSION_RSS_BYTES
+    frames_bytes: int | None = None
 
 
 def default_caps(
@@ -65,11 +68,15 @@ def default_caps(
     memory_cap_bytes: int | None = None,
     idle_s: float = 60.0,
     spare: bool = True,
+    frame_limit_bytes: int | None = None,
     **more,
 ) -> Caps:
     """The caps for this machine: the children may use ``MEMORY_SHARE`` of the memory available
     now [bytes], and as many sessions as fit in it at ``session_rss_bytes`` each (at least 1, at
-    most ``MAX_DEFAULT_SESSIONS``); explicit values win; ``more``: the other fields of Caps."""
+    most ``MAX_DEFAULT_SESSIONS``); explicit values win; ``more``: the other fields of Caps.
+    With ``frame_limit_bytes`` (one session's largest frame) and no ``frames_bytes`` in
+    ``more``, the frames in flight get what the memory cap leaves beside the sessions at rest
+    (default_budget_bytes)."""
     if available_bytes is None:
         available_bytes = int(psutil.virtual_memory().available)
     if memory_cap_bytes is None:
@@ -77,6 +84,9 @@ def default_caps(
     if max_sessions is None:
         fits = memory_cap_bytes // max(1, session_rss_bytes)
         max_sessions = int(min(MAX_DEFAULT_SESSIONS, max(1, fits)))
+    if frame_limit_bytes is not None and more.get("frames_bytes") is None:
+        baseline = max(1, max_sessions) * session_rss_bytes
+        more["frames_bytes"] = default_budget_bytes(memory_cap_bytes, baseline, frame_limit_bytes)
     return Caps(
         max(1, max_sessions),
         max(0, memory_cap_bytes),
@@ -85,3 +95,11 @@ def default_caps(
         session_bytes=session_rss_bytes,
         **more,
     )
+
+
+def default_budget_bytes(memory_cap_bytes: int, baseline_bytes: int, frame_bytes: int) -> int:
+    """The default budget of the frames in flight across sessions (app.server.frame_memory): the
+    sessions' memory cap less their resting size (``baseline_bytes``: the most sessions at what
+    the cap counts each), and at least one frame at the per-session limit ``frame_bytes`` (one
+    heaviest frame at a time, as a single session always could run)."""
+    return int(max(frame_bytes, memory_cap_bytes - baseline_bytes))

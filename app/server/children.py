@@ -146,6 +146,7 @@ class Parent(Protocol):
     scene: str | None
     options: tuple[str, ...]
     n_start_failures: int
+    child_env: dict[str, str]
     _all: set[Child]
 
     async def stop_child(self, child: Child, wait_s: float = 10.0) -> None: ...
@@ -158,7 +159,7 @@ async def start_process(launcher: Parent) -> Child:
     # two malloc arenas: each thread's own (64 MB of address space apiece) would eat the
     # session's address-space limit (app.server.process.limit_address_space) without using
     # memory
-    env = {**os.environ, "PYTHONUNBUFFERED": "1", "MALLOC_ARENA_MAX": "2"}
+    env = {**os.environ, **launcher.child_env, "PYTHONUNBUFFERED": "1", "MALLOC_ARENA_MAX": "2"}
     proc = await asyncio.create_subprocess_exec(
         *launcher.command(launcher.scene, launcher.options),
         stdin=asyncio.subprocess.PIPE,
@@ -262,13 +263,14 @@ class Zygote:
     per ``spawn TOKEN`` line; its output tells each token's process and, once it listens, its
     port."""
 
-    def __init__(self, command: list[str]):
+    def __init__(self, command: list[str], env: dict[str, str] | None = None):
         self.command = command
         self.proc: asyncio.subprocess.Process | None = None
         self.reader: asyncio.Task | None = None
         self.ready: asyncio.Future | None = None
         self.pids: dict[str, asyncio.Future] = {}  # token digest -> pid
         self.ports: dict[str, asyncio.Future] = {}  # token -> port
+        self.env = {} if env is None else env  # what its environment adds (the launcher's)
         self._lock = asyncio.Lock()
 
     async def _start(self, timeout_s: float) -> None:
@@ -280,6 +282,7 @@ class Zygote:
             stdout=asyncio.subprocess.PIPE,
             env={
                 **os.environ,
+                **self.env,
                 "PYTHONUNBUFFERED": "1",
                 "MALLOC_ARENA_MAX": "2",
                 "NUMBA_THREADING_LAYER": "workqueue",  # GNU OpenMP's aborts forked processes

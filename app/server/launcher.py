@@ -35,9 +35,10 @@ port) and proxies everything under ``/s/<session id>/`` to it:
   whose launcher vanishes (even by SIGKILL) stops when its stdin closes;
 * connections (app.server.connections): idle or partial ones are closed after 10 s, each address
   holds at most a few hundred, and refusals are logged one short line each, never with the token;
+* heavy frames in flight across the sessions share one memory budget (``caps.frames_bytes``:
+  app.server.frame_memory); a session ended or found dead gives its grants back;
 * with ``zygote`` (``lmapd app``'s default on Linux) the session processes are forked from one
-  preloaded parent (app.server.zygote) instead of started afresh: they share its modules, target and
-  compiled kernels.
+  preloaded parent (app.server.zygote): they share its modules, target and compiled kernels.
 
 By concern: ``caps`` the limits; ``ending`` when a session ends (the reaper's rules);
 ``children`` the session processes (started, or forked by the preloaded parent) and stopping
@@ -62,7 +63,17 @@ import aiohttp
 from aiohttp import web
 
 from app.logic import upload_folders
-from app.server import connections, ending, headers, index_page, pages, proxy, routes, security
+from app.server import (
+    connections,
+    ending,
+    frame_memory,
+    headers,
+    index_page,
+    pages,
+    proxy,
+    routes,
+    security,
+)
 from app.server.caps import FORKED_SESSION_BYTES as FORKED_SESSION_BYTES
 from app.server.caps import MAX_DEFAULT_SESSIONS as MAX_DEFAULT_SESSIONS
 from app.server.caps import MEMORY_SHARE as MEMORY_SHARE
@@ -108,8 +119,9 @@ class Launcher:
         zygote: Callable[..., list[str]] | None = None,
     ):
         self.token = token
+        self.child_env: dict[str, str] = {}  # what the children's environment adds (at startup)
         # sessions forked from a preloaded parent (app.server.zygote): its command, or None
-        self.zygote = Zygote(zygote(scene, options)) if zygote is not None else None
+        self.zygote = Zygote(zygote(scene, options), self.child_env) if zygote is not None else None
         self.caps = caps
         self.scene = scene
         self.command = command
@@ -130,6 +142,7 @@ class Launcher:
         self._reaper: asyncio.Task | None = None
         self._closing = False
         self._all: set[Child] = set()  # every child not yet stopped (sessions, spare)
+        self.frames = frame_memory.budget_for(caps.frames_bytes, self._all)  # None: no budget
 
     # -- the application -----------------------------------------------------------------------
     def web_app(self) -> web.Application:
@@ -142,6 +155,8 @@ class Launcher:
 
     async def _on_startup(self, _app) -> None:
         self._client = proxy.client_session()
+        if self.frames is not None:  # the frames' budget: its socket in the children's env
+            self.child_env[frame_memory.ENV] = await self.frames.start()
         self._ensure_spare()
         self._reaper = asyncio.create_task(self._reap_forever())
 
@@ -378,7 +393,10 @@ class Launcher:
         upload_folders.remove_folders_of(child.pid)  # a session killed leaves its uploads
 
     def _forget(self, session_id: str) -> Child | None:
-        return self.sessions.pop(session_id, None)
+        child = self.sessions.pop(session_id, None)
+        if child is not None and self.frames is not None:
+            self.frames.release_owner(child)  # its frames' grants go back to the budget
+        return child
 
     async def end_session(self, session_id: str, why: str) -> None:
         """Stop a session: its pages are told (a websocket close that the page shows as "session
@@ -443,6 +461,8 @@ class Launcher:
         await asyncio.gather(*(self.stop_child(c) for c in list(self._all)))
         if self.zygote is not None:
             await self.zygote.close()
+        if self.frames is not None:
+            await self.frames.close()
         if self._client is not None:
             await self._client.close()
 

@@ -67,6 +67,7 @@ def run_launcher(args: argparse.Namespace) -> int:
     from app.server import launcher  # noqa: PLC0415
 
     mib = launcher.MIB
+    frames_mb = args.frames_in_flight_mb
     caps = launcher.default_caps(
         session_rss_bytes=launcher.FORKED_SESSION_BYTES
         if args.fork_sessions
@@ -77,6 +78,8 @@ def run_launcher(args: argparse.Namespace) -> int:
         spare=not args.no_spare,
         input_idle_s=max(1.0, 60.0 * args.input_idle_min),
         max_age_s=max(1.0, 3600.0 * args.max_age_h),
+        frame_limit_bytes=int(max(1.0, args.frame_memory_mb) * mib),
+        frames_bytes=None if frames_mb is None else int(max(0.0, frames_mb) * mib),
     )
     try:
         scene = simcore.load_scene(args.scene)  # the sessions' scene, checked once here
@@ -111,6 +114,9 @@ def run_launcher(args: argparse.Namespace) -> int:
             f"{caps.memory_cap_bytes / mib:,.0f} MB for their processes, a closed page's session "
             f"ends after {caps.idle_s:g} s, one without input after "
             f"{caps.input_idle_s / 60:g} min (--shared: one scene for every tab)",
+            f"lmapd-sim app: heavy frames in flight across the sessions may take "
+            f"{caps.frames_bytes / mib:,.0f} MB together, by their estimates; more wait their turn "
+            "(--frames-in-flight-mb)",
             class_line(caps),
         )
 

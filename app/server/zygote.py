@@ -149,10 +149,13 @@ def _serve(app, args, token: str, budget: int) -> int:
     """A forked session: ``app`` (the parent's, now this process's own copy) on its own server
     until SIGTERM (as ``python -m app --shared --token-stdin`` runs it); its exit status."""
     from app.server import process  # noqa: PLC0415  (after the version check, as app_main)
+    from app.server.frame_memory import FrameGrants  # noqa: PLC0415
 
     try:
         sys.stdin.close()  # the zygote's: the launcher's spawn lines are not for the session
         app.token = token
+        # the launcher's budget for frames across sessions (its socket is in the environment)
+        app.logic.frame_grants = FrameGrants.from_environment(token)
         app.logic.studies.refresh()  # the study folders written since the app was built
         signal.signal(signal.SIGTERM, process.interrupt)
         process.limit_address_space(budget + process.HEADROOM_BYTES)

@@ -70,6 +70,15 @@ def app_bar() -> None:
 
 
 def messages() -> None:
+    v3.VAlert(  # a heavy frame waits for the server's memory (other tabs' frames hold it)
+        "{{ memory_message }}",
+        v_if="memory_message",
+        type="info",
+        density="compact",
+        variant="tonal",
+        prepend_icon="mdi-timer-sand",
+        classes="mb-2 memory-message",
+    )
     v3.VAlert(
         "{{ error_message }}",
         v_if="error_message",

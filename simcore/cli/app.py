@@ -2,7 +2,8 @@
 
 lmapd app [--host 127.0.0.1] [--port 8080] [--scene SCENE] [--shared]
           [--max-sessions N] [--memory-cap-mb MB] [--idle-s S] [--input-idle-min MIN]
-          [--max-age-h H] [--frame-memory-mb MB] [--public-url URL ...] [--no-spare]
+          [--max-age-h H] [--frame-memory-mb MB] [--frames-in-flight-mb MB]
+          [--public-url URL ...] [--no-spare]
           [--fork-sessions | --process-sessions] [--no-preview] [--studies DIR]
 """
 
@@ -38,6 +39,12 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
         "--frame-memory-mb",
         type=float,
         help="a frame estimated to need more memory is refused [MB] (default 1536)",
+    )
+    app.add_argument(
+        "--frames-in-flight-mb",
+        type=float,
+        help="the heavy frames of every session together, by their estimates: more wait their "
+        "turn [MB] (default: the memory cap less the sessions' own size)",
     )
     app.add_argument(
         "--public-url",
@@ -92,7 +99,7 @@ def run_cli(args: argparse.Namespace) -> int:
     for url in args.public_url or []:
         argv += ["--public-url", url]
     options = ("max_sessions", "memory_cap_mb", "idle_s", "input_idle_min", "max_age_h")
-    for option in (*options, "frame_memory_mb"):
+    for option in (*options, "frame_memory_mb", "frames_in_flight_mb"):
         value = getattr(args, option, None)
         if value is not None:
             argv += ["--" + option.replace("_", "-"), str(value)]

@@ -1113,11 +1113,13 @@ def test_lmapd_app_passes_the_session_and_proxy_options_on(monkeypatch):
     seen = []
     monkeypatch.setattr(app_main, "main", lambda argv: seen.append(argv) or 0)
     argv = ["app", "--input-idle-min", "5", "--max-age-h", "2", "--frame-memory-mb", "800"]
+    argv += ["--frames-in-flight-mb", "3000"]
     argv += ["--public-url", "https://a.example", "--public-url", "https://b.example:8443"]
     assert cli.main([*argv, "--fork-sessions"]) == 0
     given = app_main.parse_args(seen[0])
     assert given.fork_sessions
     assert (given.input_idle_min, given.max_age_h, given.frame_memory_mb) == (5, 2, 800)
+    assert given.frames_in_flight_mb == 3000
     assert given.public_url == ["https://a.example", "https://b.example:8443"]
 
 

@@ -27,6 +27,7 @@ from tqdm import tqdm
 from .. import io
 from ..sweep.table import _write_parquet
 from .evaluate import Evaluator, StageTally, check_figures, flat_figures
+from .polish import cheapest, confirm, pareto_front, polish, polish_front, to_confirm
 from .report import (
     FRONT_NAME,
     REPORT_NAME,
@@ -38,19 +39,7 @@ from .report import (
     write_csv,
     write_figures,
 )
-from .search import (
-    Record,
-    SearchState,
-    _key,
-    cheapest,
-    confirm,
-    load_records,
-    pareto_front,
-    polish,
-    polish_front,
-    search,
-    to_confirm,
-)
+from .search import Record, SearchState, _key, load_records, search
 from .study import Requirement, Study, StudyError, Variable
 from .study_file import load_study, study_from_dict
 

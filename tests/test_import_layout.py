@@ -284,6 +284,7 @@ SIMCORE_FLOORS = (
     (
         "simcore.target",
         "simcore.target_mesh",
+        "simcore.mesh_distance",
         "simcore.target_model",
         "simcore.geometry",
         "simcore.echo",

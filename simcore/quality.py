@@ -4,7 +4,8 @@ The figures follow the multi-view-stereo benchmarks (Tanks and Temples, ETH3D): 
 tolerance tau (``quality.tau_m``)
 
 - precision: the share of the cloud's target points within tau of the true mesh (exact
-  point-to-mesh distance, point-cloud-utils' BVH);
+  point-to-mesh distance, libigl's AABB tree of the mesh, built once per mesh:
+  :mod:`simcore.mesh_distance`);
 - recall (completeness): the share of the *visible* true surface within tau of a point; the
   whole mesh is sampled uniformly by area, and a sample counts only if it lies inside the
   array's field of view and nothing hides it from the lidar (a ray cast to it, Embree): the
@@ -45,6 +46,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .geometry import RayCaster
+from .mesh_distance import closest_points
 from .stage import Stage
 
 if TYPE_CHECKING:
@@ -220,20 +222,6 @@ def recall_figures(
     return recalled, recall, projected
 
 
-def point_to_mesh_m(points_t, vertices_m, faces) -> np.ndarray:
-    """(n,) exact distance of each point (n, 3) to the nearest of the triangles ``faces`` (m, 3)
-    of ``vertices_m`` [m] (point-cloud-utils' BVH), inf where there is no triangle."""
-    import point_cloud_utils as pcu  # noqa: PLC0415  (only when quality is asked for)
-
-    points_t = np.ascontiguousarray(points_t, dtype=np.float64)
-    if not len(points_t) or not len(faces):
-        return np.full(len(points_t), np.inf)
-    vertices = np.ascontiguousarray(vertices_m, dtype=np.float64)
-    faces = np.ascontiguousarray(faces, dtype=np.int32)
-    distance, _, _ = pcu.closest_points_on_mesh(points_t, vertices, faces)
-    return np.abs(np.asarray(distance, dtype=np.float64)).reshape(len(points_t))  # (1,) too
-
-
 def to_target_frame(points_s, pose: PoseInSensor) -> np.ndarray:
     """Sensor-frame points (n, 3) in the target frame: R^T (p - t)."""
     return (np.asarray(points_s, dtype=np.float64) - pose.translation_m) @ pose.rotation
@@ -266,7 +254,7 @@ def line_of_sight_errors_m(
     Unlike ``range_error_m`` (measured against the energy-weighted truth of the point's own
     surface group), a mixed pixel's point floating between two depths counts with its distance
     from the surface its line of sight meets. ``mesh_m``: the points' distances to the mesh, if
-    known (:func:`point_to_mesh_m`)."""
+    known (:func:`simcore.mesh_distance.point_to_mesh_m`)."""
     points_t = np.asarray(points_t, dtype=np.float64)
     if not len(points_t):
         return np.zeros(0)
@@ -282,7 +270,7 @@ def line_of_sight_errors_m(
     miss = ~np.isfinite(hit_m)
     if miss.any():
         error_m[miss] = (
-            point_to_mesh_m(points_t[miss], model.vertices_m, model.faces)
+            closest_points(model.surface).distance_m(points_t[miss])
             if mesh_m is None
             else np.asarray(mesh_m)[miss]
         )
@@ -334,9 +322,10 @@ def quality_metrics(
     attrs = cloud.attributes
     target = ~np.asarray(attrs["is_outlier"], dtype=bool)
     points_t = to_target_frame(cloud.points[target], hits.pose)
-    # each target point's exact distance to the whole mesh, once (one BVH of the mesh): the
-    # precision's test, the distance figures and the line-of-sight error where a ray misses
-    mesh_m = point_to_mesh_m(points_t, model.vertices_m, model.faces)
+    # each target point's exact distance to the whole mesh, once a frame (the mesh's tree is
+    # built once per mesh): the precision's test, the distance figures and the line-of-sight
+    # error where a ray misses
+    mesh_m = closest_points(model.surface).distance_m(points_t)
     near = mesh_m <= tau_m
     points_s, face_s, area_m2 = mesh_samples(model, seed, n_samples)
     surface = seen_samples(caster, hits.pose, fov_rad, points_s, face_s, area_m2)

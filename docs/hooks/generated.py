@@ -130,8 +130,8 @@ def atlas_bench_markdown(path: Path = ATLAS_BENCH_JSON) -> str:
         "",
         f"The quality stage of one frame at {fig['quality_pixels']} x {fig['quality_pixels']} px "
         f"(12 attitudes x {len(q['shared']) // 12}, interleaved): {_spread_ms(q['shared'])} with "
-        f"the samples shared, {_spread_ms(q['anew'])} drawing them anew for each frame "
-        "(as every frame did before).",
+        "the recall's surface samples and the mesh's closest-point tree shared, "
+        f"{_spread_ms(q['anew'])} making both anew for each frame (as every frame did before).",
         "",
         "| pixels | attitudes | workers | wall time (s) | a frame with its quality figures |",
         "|---|---|---|---|---|",

@@ -86,8 +86,9 @@ def polish_front(study: Study, front: Sequence[Record], evaluator, state, out, c
     for k, variables in enumerate(along):
         for i in picks if variables else ():
             rec = polish(study, front[i], evaluator, state, out, cache, variables)
-            if all(float(rec.params[v.key]) <= v.low for v in variables):  # at its bounds: the
-                for other in along[:k] + along[k + 1 :]:  # other costs bring it onto the front
+            # bisected down to its bounds: the other costs bring it to the front
+            if all(float(rec.params[v.key]) <= float(v.low or 0.0) for v in variables):
+                for other in along[:k] + along[k + 1 :]:
                     rec = polish(study, rec, evaluator, state, out, cache, other)
 
 

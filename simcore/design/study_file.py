@@ -291,9 +291,9 @@ def _track_points(
     total = sum(len(t) for _, t, _ in times)
     if total > MAX_ENVELOPE:
         counts = sorted({len(t) for _, t, _ in times})
-        frames = f"{counts[0]}" if len(counts) == 1 else f"{counts[0]}-{counts[-1]}"
+        span = f"{counts[0]}" if len(counts) == 1 else f"{counts[0]}-{counts[-1]}"
         raise StudyError(
-            f"{where}: the envelope has {total} points ({frames} trajectory frames x "
+            f"{where}: the envelope has {total} points ({span} trajectory frames x "
             f"{len(times)} conditions), more than {MAX_ENVELOPE}; each trial runs them all: "
             "take fewer frames (trajectory.duration_s, frame_rate_hz) or fewer conditions"
         )

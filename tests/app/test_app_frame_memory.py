@@ -24,18 +24,16 @@ import threading
 import time
 from pathlib import Path
 
-import aiohttp
 import pytest
-from aiohttp import web
 from support.fork import require_fork
 from support.frame_sessions import PeakSampler, heavy_frame, open_page, tree_pss_bytes
 from support.hostile_client import Client
+from test_app_launcher import listening
 
 import simcore
 from app.engine import FrameRefused, frame_bytes
 from app.logic.controller import memory_wait_text
 from app.runner import StaleRequest
-from app.server import connections
 from app.server import frame_memory as fm
 from app.server import launcher as lau
 
@@ -257,15 +255,8 @@ async def real_launcher(frames_bytes: int):
     free port: (launcher, base address, client)."""
     caps = lau.Caps(max_sessions=4, memory_cap_bytes=2**40, spare=False, frames_bytes=frames_bytes)
     launcher = lau.Launcher(TOKEN, "127.0.0.1", caps, zygote=lau.zygote_command)
-    runner = web.AppRunner(launcher.web_app(), access_log=None)
-    await runner.setup()
-    server, sweeper, port = await connections.listen(runner, launcher.guard, "127.0.0.1", 0)
-    try:
-        async with aiohttp.ClientSession(cookie_jar=aiohttp.DummyCookieJar()) as client:
-            yield launcher, f"http://127.0.0.1:{port}", client
-    finally:
-        await connections.stop_listening(server, sweeper)
-        await runner.cleanup()
+    async with listening(launcher) as served:
+        yield served
 
 
 async def _bounded(condition, what: str) -> None:

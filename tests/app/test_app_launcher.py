@@ -65,6 +65,14 @@ async def serving(the_caps: lau.Caps, **options):
     """A launcher with stand-in sessions on a free port, behind its connection guard:
     (launcher, base address, client); ``options``: the Launcher's own (``origins``)."""
     launcher = lau.Launcher(TOKEN, "127.0.0.1", the_caps, command=fake_command, **options)
+    async with listening(launcher) as served:
+        yield served
+
+
+@contextlib.asynccontextmanager
+async def listening(launcher: lau.Launcher):
+    """``launcher`` served on a free port behind its connection guard: (launcher, base address,
+    client)."""
     runner = web.AppRunner(launcher.web_app(), access_log=None)
     await runner.setup()
     server, sweeper, port = await connections.listen(runner, launcher.guard, "127.0.0.1", 0)
